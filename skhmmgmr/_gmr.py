@@ -1,0 +1,116 @@
+"""Gaussian Mixture Regression weighted by the forward variable on the inputs (METHOD.md s. 2).
+
+For every state ``k`` the joint Gaussian over ``[F, T]`` gives
+- the input marginal ``N(F; mu_k^F, S_k^FF)``,
+- the conditional mean ``m_k(F) = mu_k^T + S_k^TF (S_k^FF)^-1 (F - mu_k^F)``, an affine map
+  stored as ``coef_k`` and ``intercept_k``,
+- the conditional covariance ``S_k^TT - S_k^TF (S_k^FF)^-1 S_k^FT``.
+
+The filter runs the normalised forward recursion on the input marginals only (causal, no
+look-ahead) and mixes the per-state conditional means with the filtered state probabilities.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from hmmlearn import _hmmc
+from scipy import linalg
+
+from ._gaussian import compute_precision_cholesky, estimate_log_gaussian_prob
+
+
+@dataclass
+class GMRParameters:
+    """Everything the filter needs, in the data's own units."""
+
+    startprob: np.ndarray  # (K,)
+    transmat: np.ndarray  # (K, K)
+    input_means: np.ndarray  # (K, n_inputs)
+    input_precisions_chol: np.ndarray  # (K, n_inputs, n_inputs)
+    coef: np.ndarray  # (K, n_outputs, n_inputs)
+    intercept: np.ndarray  # (K, n_outputs)
+    conditional_covariances: np.ndarray  # (K, n_outputs, n_outputs)
+
+    @property
+    def n_states(self):
+        return self.startprob.shape[0]
+
+
+def condition_on_inputs(startprob, transmat, means, covariances, n_inputs):
+    """Split joint Gaussians into input marginals and per-state linear regressions."""
+    n_states = means.shape[0]
+    n_outputs = means.shape[1] - n_inputs
+    coef = np.empty((n_states, n_outputs, n_inputs))
+    conditional = np.empty((n_states, n_outputs, n_outputs))
+    for k in range(n_states):
+        s_ff = covariances[k, :n_inputs, :n_inputs]
+        s_tf = covariances[k, n_inputs:, :n_inputs]
+        s_tt = covariances[k, n_inputs:, n_inputs:]
+        coef[k] = linalg.solve(s_ff, s_tf.T, assume_a="pos").T
+        conditional[k] = s_tt - coef[k] @ s_tf.T
+        conditional[k] = 0.5 * (conditional[k] + conditional[k].T)
+    intercept = means[:, n_inputs:] - np.einsum("kof,kf->ko", coef, means[:, :n_inputs])
+    input_covariances = np.ascontiguousarray(covariances[:, :n_inputs, :n_inputs])
+    return GMRParameters(
+        startprob=startprob,
+        transmat=transmat,
+        input_means=np.ascontiguousarray(means[:, :n_inputs]),
+        input_precisions_chol=compute_precision_cholesky(input_covariances),
+        coef=coef,
+        intercept=intercept,
+        conditional_covariances=conditional,
+    )
+
+
+def filter_state_probabilities(X, recordings, params):
+    """Filtered state probabilities ``alpha_t,k`` given the inputs up to ``t``.
+
+    The recursion restarts from the start probabilities at the first row of every recording.
+    """
+    log_prob = estimate_log_gaussian_prob(X, params.input_means, params.input_precisions_chol)
+    log_prob -= log_prob.max(axis=1, keepdims=True)
+    frameprob = np.exp(log_prob)
+    alpha = np.empty_like(frameprob)
+    for _, rows in recordings.slices():
+        try:
+            _, alpha[rows], _ = _hmmc.forward_scaling(
+                params.startprob, params.transmat, frameprob[rows]
+            )
+        except ValueError:
+            alpha[rows] = _forward_with_restarts(params.startprob, params.transmat, frameprob[rows])
+    return alpha
+
+
+def _forward_with_restarts(startprob, transmat, frameprob):
+    """Slow, safe forward recursion for a recording that the compiled kernel rejects.
+
+    When no state that the transitions allow explains a row (every product underflows), the
+    recursion restarts at that row from the input densities alone instead of producing NaN.
+    """
+    alpha = np.empty_like(frameprob)
+    prior = startprob
+    for t, frames in enumerate(frameprob):
+        current = prior * frames
+        total = current.sum()
+        if not total > 0.0:
+            current = frames
+            total = current.sum()
+        alpha[t] = current / total
+        prior = alpha[t] @ transmat
+    return alpha
+
+
+def conditional_means(X, params):
+    """Per-state conditional means ``m_t,k``, shape (n_samples, n_states, n_outputs)."""
+    return np.einsum("nf,kof->nko", X, params.coef) + params.intercept[np.newaxis]
+
+
+def mix_estimates(alpha, state_means, params, return_std=False):
+    """Mix per-state conditional means; optionally the law-of-total-variance std."""
+    estimate = np.einsum("nk,nko->no", alpha, state_means)
+    if not return_std:
+        return estimate, None
+    within = alpha @ np.diagonal(params.conditional_covariances, axis1=1, axis2=2)
+    spread = state_means - estimate[:, np.newaxis, :]
+    between = np.einsum("nk,nko->no", alpha, spread * spread)
+    return estimate, np.sqrt(within + between)

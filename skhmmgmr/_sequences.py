@@ -1,0 +1,146 @@
+"""Recordings: turning one recording id per row into contiguous, time-ordered sequences.
+
+scikit-learn slices per-row metadata (``groups``) per cross-validation fold, so the package keeps
+one recording id per row and derives the sequence boundaries from it. The rows of a recording
+must be contiguous and in time order; everything here checks that and says which recording is
+at fault.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+
+@dataclass(frozen=True)
+class Recordings:
+    """Contiguous recordings of a data set.
+
+    Attributes
+    ----------
+    ids : ndarray of shape (n_recordings,)
+        Recording id of every recording, in order of appearance.
+    starts, stops : ndarray of shape (n_recordings,)
+        Row ``starts[i]`` (inclusive) to ``stops[i]`` (exclusive) hold recording ``ids[i]``.
+    """
+
+    ids: np.ndarray
+    starts: np.ndarray
+    stops: np.ndarray
+
+    @property
+    def lengths(self):
+        return self.stops - self.starts
+
+    def __len__(self):
+        return len(self.ids)
+
+    def slices(self):
+        """Iterate over ``(recording_id, slice)`` pairs."""
+        for rec_id, start, stop in zip(self.ids, self.starts, self.stops, strict=True):
+            yield rec_id, slice(int(start), int(stop))
+
+    def recording_of_row(self, row):
+        """Recording id that holds ``row``."""
+        index = int(np.searchsorted(self.stops, row, side="right"))
+        return self.ids[index]
+
+    def row_ids(self):
+        """One recording id per row."""
+        return np.repeat(self.ids, self.lengths)
+
+
+def as_recordings(groups, n_samples, *, time=None, min_length=1):
+    """Validate ``groups`` (one recording id per row) and return the recordings.
+
+    Parameters
+    ----------
+    groups : array-like of shape (n_samples,) or None
+        Recording id of every row; ``None`` means all rows form one recording.
+    n_samples : int
+        Number of rows of the data.
+    time : array-like of shape (n_samples,), default=None
+        Time stamps; when given they must increase strictly within every recording.
+    min_length : int, default=1
+        Minimum number of rows a recording needs.
+
+    Returns
+    -------
+    Recordings
+    """
+    if groups is None:
+        recordings = Recordings(
+            ids=np.array([0]), starts=np.array([0]), stops=np.array([n_samples])
+        )
+    else:
+        recordings = _contiguous_recordings(groups, n_samples)
+    if time is not None:
+        _check_time_order(time, recordings, n_samples)
+    short = recordings.lengths < min_length
+    if np.any(short):
+        first = int(np.flatnonzero(short)[0])
+        raise ValueError(
+            f"recording {recordings.ids[first]!r} has n_samples={recordings.lengths[first]} "
+            f"row(s); at least {min_length} are needed"
+        )
+    return recordings
+
+
+def _contiguous_recordings(groups, n_samples):
+    groups = np.asarray(groups.to_numpy() if isinstance(groups, pd.Series) else groups)
+    if groups.ndim != 1:
+        raise ValueError(f"groups must be 1-D (one recording id per row), got shape {groups.shape}")
+    if groups.shape[0] != n_samples:
+        raise ValueError(
+            f"groups has {groups.shape[0]} entries but X has {n_samples} rows; "
+            "give one recording id per row"
+        )
+    if n_samples == 0:
+        raise ValueError("X has no rows")
+    if pd.isna(groups).any():
+        row = int(np.flatnonzero(pd.isna(groups))[0])
+        raise ValueError(f"groups contains a missing recording id (first at row {row})")
+    codes, _ = pd.factorize(groups, sort=False)
+    change = np.flatnonzero(codes[1:] != codes[:-1]) + 1
+    starts = np.concatenate(([0], change))
+    stops = np.concatenate((change, [n_samples]))
+    block_codes = codes[starts]
+    if len(np.unique(block_codes)) != len(block_codes):
+        _raise_not_contiguous(groups, block_codes, starts, stops)
+    return Recordings(ids=groups[starts], starts=starts, stops=stops)
+
+
+def _raise_not_contiguous(groups, block_codes, starts, stops):
+    seen = {}
+    for code, start, stop in zip(block_codes, starts, stops, strict=True):
+        if code in seen:
+            first_start, first_stop = seen[code]
+            raise ValueError(
+                f"the rows of recording {groups[start]!r} are not contiguous (rows "
+                f"{first_start}-{first_stop - 1} and {start}-{stop - 1}); sort the rows by "
+                "recording, then by time, before fitting or predicting"
+            )
+        seen[code] = (start, stop)
+
+
+def _check_time_order(time, recordings, n_samples):
+    time = np.asarray(time, dtype=float)
+    if time.shape != (n_samples,):
+        raise ValueError(f"time has shape {time.shape}, expected ({n_samples},)")
+    if not np.all(np.isfinite(time)):
+        row = int(np.flatnonzero(~np.isfinite(time))[0])
+        raise ValueError(
+            f"time contains NaN or infinity at row {row} "
+            f"(recording {recordings.recording_of_row(row)!r})"
+        )
+    steps = np.diff(time)
+    inside = np.ones(max(n_samples - 1, 0), dtype=bool)
+    inside[recordings.starts[1:] - 1] = False
+    bad = np.flatnonzero(inside & (steps <= 0))
+    if bad.size:
+        row = int(bad[0]) + 1
+        raise ValueError(
+            f"time does not increase within recording {recordings.recording_of_row(row)!r} "
+            f"at row {row} ({time[row - 1]} then {time[row]}); rows of a recording must be "
+            "in time order"
+        )

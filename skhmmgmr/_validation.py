@@ -1,0 +1,42 @@
+"""Input checks whose messages name the column and the recording at fault."""
+
+import numpy as np
+
+
+def check_finite(values, *, name, column_names, recordings):
+    """Raise a ValueError naming the first NaN or infinite entry of ``values``.
+
+    Parameters
+    ----------
+    values : ndarray of shape (n_samples, n_columns)
+    name : str
+        What the array is for the user ("X", "y").
+    column_names : sequence of str
+        Name of every column.
+    recordings : Recordings
+        Recordings of the rows, to say where the bad entry is.
+    """
+    finite = np.isfinite(values)
+    if finite.all():
+        return
+    rows, columns = np.nonzero(~finite)
+    row, column = int(rows[0]), int(columns[0])
+    bad_value = values[row, column]
+    kind = "NaN" if np.isnan(bad_value) else "infinity"
+    recording = recordings.recording_of_row(row)
+    start = int(recordings.starts[np.searchsorted(recordings.stops, row, side="right")])
+    n_bad = int((~finite).sum())
+    raise ValueError(
+        f"Input {name} contains {kind} in column {column_names[column]!r} of recording "
+        f"{recording!r} (row {row - start} of the recording, row {row} overall; {n_bad} "
+        "non-finite value(s) in all). Fill or drop them before fitting or predicting: "
+        "a NaN or infinity cannot be filtered."
+    )
+
+
+def column_names_of(estimator, n_columns, prefix="x"):
+    """Feature names seen in fit, or positional names."""
+    names = getattr(estimator, "feature_names_in_", None)
+    if names is not None and len(names) == n_columns:
+        return [str(name) for name in names]
+    return [f"{prefix}{i}" for i in range(n_columns)]

@@ -1,0 +1,39 @@
+"""Column convention shared by every dataset of the package.
+
+A dataset is a tidy :class:`pandas.DataFrame` with one row per sample. Rows of one recording are
+contiguous and in time order. The meta columns come first, then the candidate features, then the
+driver torque (the regression target).
+"""
+
+RECORDING = "recording"
+DRIVER = "driver"
+SETTING = "setting"
+SPLIT = "split"
+TIME = "time"
+TARGET = "driver_torque"
+
+META_COLUMNS = (RECORDING, DRIVER, SETTING, SPLIT, TIME)
+
+# The 18 candidate features of the thesis (Table B.2), in its order, with SI units.
+FEATURE_UNITS = {
+    "steering_wheel_angle": "rad",
+    "steering_wheel_velocity": "rad/s",
+    "steering_wheel_acceleration": "rad/s^2",
+    "lateral_velocity": "m/s",
+    "lateral_acceleration": "m/s^2",
+    "slip_angle": "rad",
+    "yaw_rate": "rad/s",
+    "yaw_acceleration": "rad/s^2",
+    "roll_angle": "rad",
+    "roll_velocity": "rad/s",
+    "roll_acceleration": "rad/s^2",
+    "lateral_deviation_0m": "m",
+    "heading_deviation_0m": "rad",
+    "road_curvature_0m": "1/m",
+    "heading_deviation_10m": "rad",
+    "road_curvature_10m": "1/m",
+    "heading_deviation_30m": "rad",
+    "road_curvature_30m": "1/m",
+}
+FEATURE_NAMES = tuple(FEATURE_UNITS)
+TARGET_UNIT = "Nm"

@@ -1,0 +1,384 @@
+"""The HMM-GMR regressor: a Gaussian HMM over ``[inputs, outputs]`` read out by causal GMR."""
+
+import warnings
+from numbers import Integral, Real
+
+import numpy as np
+from sklearn.base import BaseEstimator, RegressorMixin, TransformerMixin, _fit_context
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.metrics import r2_score
+from sklearn.utils import metadata_routing
+from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.validation import check_is_fitted, validate_data
+
+from ._em import INIT_METHODS, HMMParameters, fit_hmm, score_hmm
+from ._gmr import condition_on_inputs, conditional_means, filter_state_probabilities, mix_estimates
+from ._sequences import as_recordings
+from ._validation import check_finite, column_names_of
+
+
+class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
+    """Hidden Markov Model + Gaussian Mixture Regression (HMM-GMR) regressor.
+
+    A fully connected hidden Markov model with one full-covariance Gaussian per state is fitted
+    by Baum-Welch (EM) on the joint vector ``[X, y]`` of every recording. Prediction is causal:
+    the forward variable is computed on the inputs only, restarted at every recording, and
+    weights the per-state Gaussian-conditional means of ``y`` given ``X`` (Gaussian Mixture
+    Regression).
+
+    Read more in the user guide and in METHOD.md sections 1-2.
+
+    Parameters
+    ----------
+    n_states : int, default=5
+        Number of hidden states ``K``.
+    n_iter : int, default=100
+        Maximum number of EM iterations per initialisation.
+    tol : float, default=1e-4
+        Convergence threshold on the gain in log-likelihood per row between two EM iterations.
+    n_init : int, default=1
+        Number of initialisations; the fit with the highest log-likelihood is kept.
+    init_params : {"kmeans", "k-means++", "random", "random_from_data"}, default="kmeans"
+        How the state means and covariances are initialised (as in
+        :class:`sklearn.mixture.GaussianMixture`); start probabilities start uniform and the
+        transition rows are drawn from a flat Dirichlet distribution.
+    reg_covar : float, default=1e-6
+        Non-negative value added to the diagonal of every state covariance in every M-step.
+        The engine works on standardised columns (zero mean, unit variance), so the value is
+        relative to each column's variance: constant, collinear and badly scaled columns are
+        all handled by the same regularisation.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the initialisation, for reproducible fits.
+    verbose : int, default=0
+        Print the log-likelihood of every EM iteration when positive.
+
+    Attributes
+    ----------
+    startprob_ : ndarray of shape (n_states,)
+        Start probabilities ``pi``.
+    transmat_ : ndarray of shape (n_states, n_states)
+        Transition matrix; row ``j`` holds the probabilities of leaving state ``j``.
+    means_ : ndarray of shape (n_states, n_features_in_ + n_outputs_)
+        State means over the joint vector ``[inputs, outputs]``, in the data's units.
+    covars_ : ndarray of shape (n_states, n_features_in_ + n_outputs_, n_features_in_ + n_outputs_)
+        Full state covariances over the joint vector, in the data's units.
+    n_features_in_ : int
+        Number of input features.
+    feature_names_in_ : ndarray of shape (n_features_in_,)
+        Input names, when ``X`` has string column names.
+    n_outputs_ : int
+        Number of outputs (columns of ``y``).
+    n_iter_ : int
+        EM iterations of the kept initialisation.
+    converged_ : bool
+        Whether the kept initialisation converged.
+    log_likelihood_ : float
+        Log-likelihood of the training recordings under the fitted parameters.
+    log_likelihood_history_ : ndarray
+        Log-likelihood before every M-step of the kept initialisation, then that of the
+        fitted parameters; non-decreasing up to round-off.
+
+    See Also
+    --------
+    skhmmgmr.PerformanceScore : the thesis' accuracy/smoothness scorer.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skhmmgmr import HMMGMRRegressor
+    >>> rng = np.random.default_rng(0)
+    >>> X = np.cumsum(rng.normal(size=(400, 2)), axis=0) / 10
+    >>> y = 2.0 * X[:, 0] - X[:, 1] + rng.normal(scale=0.05, size=400)
+    >>> groups = np.repeat(["a", "b"], 200)
+    >>> model = HMMGMRRegressor(n_states=2, random_state=0).fit(X, y, groups=groups)
+    >>> model.predict(X, groups=groups).shape
+    (400,)
+    >>> round(model.score(X, y, groups=groups), 2)
+    0.99
+    """
+
+    _parameter_constraints = {
+        "n_states": [Interval(Integral, 1, None, closed="left")],
+        "n_iter": [Interval(Integral, 1, None, closed="left")],
+        "tol": [Interval(Real, 0, None, closed="left")],
+        "n_init": [Interval(Integral, 1, None, closed="left")],
+        "init_params": [StrOptions(set(INIT_METHODS))],
+        "reg_covar": [Interval(Real, 0, None, closed="left")],
+        "random_state": ["random_state"],
+        "verbose": ["verbose"],
+    }
+
+    __metadata_request__predict = {"return_std": metadata_routing.UNUSED}
+
+    def __init__(
+        self,
+        n_states=5,
+        *,
+        n_iter=100,
+        tol=1e-4,
+        n_init=1,
+        init_params="kmeans",
+        reg_covar=1e-6,
+        random_state=None,
+        verbose=0,
+    ):
+        self.n_states = n_states
+        self.n_iter = n_iter
+        self.tol = tol
+        self.n_init = n_init
+        self.init_params = init_params
+        self.reg_covar = reg_covar
+        self.random_state = random_state
+        self.verbose = verbose
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, X, y, groups=None, time=None):
+        """Fit the HMM on the joint ``[X, y]`` of every recording by Baum-Welch.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_features)
+            Input features, rows of a recording contiguous and in time order.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
+            Outputs (the driver torque).
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row; ``None`` means one recording.
+        time : array-like of shape (n_samples,), default=None
+            Optional time stamps, checked to increase within every recording.
+
+        Returns
+        -------
+        self : HMMGMRRegressor
+        """
+        X, y = validate_data(
+            self, X, y, multi_output=True, y_numeric=True, ensure_all_finite=False, dtype=float
+        )
+        self._y_is_1d = y.ndim == 1
+        Y = y.reshape(-1, 1) if y.ndim == 1 else y
+        self.n_outputs_ = Y.shape[1]
+        recordings = as_recordings(groups, X.shape[0], time=time, min_length=2)
+        check_finite(
+            X, name="X", column_names=column_names_of(self, X.shape[1]), recordings=recordings
+        )
+        check_finite(
+            Y,
+            name="y",
+            column_names=[f"output {i}" for i in range(Y.shape[1])],
+            recordings=recordings,
+        )
+        joint = np.hstack([X, Y])
+        n_samples, n_dims = joint.shape
+        if n_samples < self.n_states:
+            raise ValueError(
+                f"n_states={self.n_states} is more than the data support: every state needs at "
+                f"least one row, and X has n_samples={n_samples}"
+            )
+        if n_samples < self.n_states * (n_dims + 1):
+            warnings.warn(
+                f"n_states={self.n_states} states over {n_dims} columns need at least "
+                f"{self.n_states * (n_dims + 1)} rows for full covariances; with {n_samples} "
+                "rows they are determined by reg_covar.",
+                UserWarning,
+                stacklevel=2,
+            )
+        center = joint.mean(axis=0)
+        scale = joint.std(axis=0)
+        scale[scale <= 1e-12 * np.maximum(np.abs(center), 1.0)] = 1.0
+        standardized = (joint - center) / scale
+        result = fit_hmm(
+            standardized,
+            recordings,
+            self.n_states,
+            n_init=self.n_init,
+            init_params=self.init_params,
+            n_iter=self.n_iter,
+            tol=self.tol,
+            reg_covar=self.reg_covar,
+            random_state=self.random_state,
+        )
+        if not result.converged:
+            warnings.warn(
+                f"EM did not converge in n_iter={self.n_iter} iterations (tol={self.tol}); "
+                "increase n_iter or tol.",
+                ConvergenceWarning,
+                stacklevel=2,
+            )
+        params = result.parameters
+        jacobian = n_samples * np.sum(np.log(scale))
+        self.startprob_ = params.startprob
+        self.transmat_ = params.transmat
+        self.means_ = params.means * scale + center
+        self.covars_ = params.covariances * np.outer(scale, scale)
+        self.n_iter_ = result.n_iter
+        self.converged_ = result.converged
+        self.log_likelihood_ = result.log_likelihood - jacobian
+        self.log_likelihood_history_ = np.asarray(result.history) - jacobian
+        self._center = center
+        self._scale = scale
+        if self.verbose:
+            for i, value in enumerate(self.log_likelihood_history_):
+                print(f"EM iteration {i}: log-likelihood {value:.6f}")
+        return self
+
+    def _gmr_parameters(self):
+        n_inputs = self.n_features_in_
+        scale, center = self._scale, self._center
+        return condition_on_inputs(
+            self.startprob_,
+            self.transmat_,
+            (self.means_ - center) / scale,
+            self.covars_ / np.outer(scale, scale),
+            n_inputs,
+        )
+
+    def _validate_inputs(self, X, groups, time):
+        check_is_fitted(self)
+        X = validate_data(self, X, reset=False, ensure_all_finite=False, dtype=float)
+        recordings = as_recordings(groups, X.shape[0], time=time)
+        check_finite(
+            X, name="X", column_names=column_names_of(self, X.shape[1]), recordings=recordings
+        )
+        standardized = (X - self._center[: X.shape[1]]) / self._scale[: X.shape[1]]
+        return standardized, recordings
+
+    def predict_state_proba(self, X, groups=None, time=None):
+        """Filtered state probabilities ``alpha_t,k`` given the inputs up to each row.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_features)
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row; the filter restarts at every recording.
+        time : array-like of shape (n_samples,), default=None
+            Optional time stamps, checked to increase within every recording.
+
+        Returns
+        -------
+        alpha : ndarray of shape (n_samples, n_states)
+            Rows sum to one.
+        """
+        standardized, recordings = self._validate_inputs(X, groups, time)
+        return filter_state_probabilities(standardized, recordings, self._gmr_parameters())
+
+    def predict(self, X, groups=None, time=None, return_std=False):
+        """Causal GMR estimate of the outputs, filtered recording by recording.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_features)
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row; the filter restarts at every recording. Without it
+            all rows are filtered as one recording.
+        time : array-like of shape (n_samples,), default=None
+            Optional time stamps, checked to increase within every recording.
+        return_std : bool, default=False
+            Also return the predictive standard deviation (law of total variance over the
+            filtered mixture).
+
+        Returns
+        -------
+        y_pred : ndarray of shape (n_samples,) or (n_samples, n_outputs)
+        y_std : ndarray of the same shape, only when ``return_std`` is True
+        """
+        standardized, recordings = self._validate_inputs(X, groups, time)
+        params = self._gmr_parameters()
+        alpha = filter_state_probabilities(standardized, recordings, params)
+        state_means = conditional_means(standardized, params)
+        estimate, std = mix_estimates(alpha, state_means, params, return_std=return_std)
+        output_scale = self._scale[self.n_features_in_ :]
+        estimate = estimate * output_scale + self._center[self.n_features_in_ :]
+        if self._y_is_1d:
+            estimate = estimate[:, 0]
+        if not return_std:
+            return estimate
+        std = std * output_scale
+        return estimate, (std[:, 0] if self._y_is_1d else std)
+
+    def transform(self, X, groups=None, time=None):
+        """Filtered state probabilities, as features (see :meth:`predict_state_proba`).
+
+        With ``set_output(transform="pandas")`` the result is a DataFrame whose columns are
+        ``get_feature_names_out()``.
+        """
+        return self.predict_state_proba(X, groups=groups, time=time)
+
+    def fit_transform(self, X, y, groups=None, time=None):
+        """Fit, then return the filtered state probabilities of the training recordings."""
+        return self.fit(X, y, groups=groups, time=time).transform(X, groups=groups, time=time)
+
+    def get_feature_names_out(self, input_features=None):
+        """Names of the state-probability columns: ``state_0`` ... ``state_{K-1}``."""
+        check_is_fitted(self)
+        return np.asarray([f"state_{k}" for k in range(self.n_states)], dtype=object)
+
+    def score(self, X, y, groups=None, sample_weight=None):
+        """Coefficient of determination R^2 of the per-recording causal predictions.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_features)
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row.
+        sample_weight : array-like of shape (n_samples,), default=None
+
+        Returns
+        -------
+        score : float
+        """
+        return r2_score(y, self.predict(X, groups=groups), sample_weight=sample_weight)
+
+    def log_likelihood(self, X, y, groups=None):
+        """Log-likelihood of the joint ``[X, y]`` recordings under the fitted HMM.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_features)
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row; the forward pass restarts at every recording.
+
+        Returns
+        -------
+        log_likelihood : float
+        """
+        check_is_fitted(self)
+        X, y = validate_data(self, X, y, reset=False, multi_output=True, dtype=float)
+        Y = y.reshape(-1, 1) if y.ndim == 1 else y
+        joint = np.hstack([X, Y])
+        recordings = as_recordings(groups, joint.shape[0])
+        standardized = (joint - self._center) / self._scale
+        params = HMMParameters(
+            self.startprob_,
+            self.transmat_,
+            (self.means_ - self._center) / self._scale,
+            self.covars_ / np.outer(self._scale, self._scale),
+        )
+        jacobian = joint.shape[0] * np.sum(np.log(self._scale))
+        return score_hmm(standardized, recordings, params) - jacobian
+
+    def n_parameters(self):
+        """Number of free parameters of the fitted HMM (for information criteria)."""
+        check_is_fitted(self)
+        n_states, n_dims = self.means_.shape
+        return int(
+            (n_states - 1)
+            + n_states * (n_states - 1)
+            + n_states * n_dims
+            + n_states * n_dims * (n_dims + 1) // 2
+        )
+
+    def bic(self, X, y, groups=None):
+        """Bayesian information criterion of the recordings (lower is better).
+
+        ``-2 log L + n_parameters * log(n_samples)``.
+        """
+        log_likelihood = self.log_likelihood(X, y, groups=groups)
+        return -2.0 * log_likelihood + self.n_parameters() * np.log(len(X))
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.target_tags.required = True
+        tags.target_tags.multi_output = True
+        tags.input_tags.allow_nan = False
+        return tags
