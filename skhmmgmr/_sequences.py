@@ -106,8 +106,11 @@ def _contiguous_recordings(groups, n_samples):
     stops = np.concatenate((change, [n_samples]))
     block_codes = codes[starts]
     if len(np.unique(block_codes)) != len(block_codes):
-        _raise_not_contiguous(groups, block_codes, starts, stops)
-    return Recordings(ids=groups[starts], starts=starts, stops=stops)
+        _raise_not_contiguous(groups.tolist(), block_codes, starts, stops)
+    # Plain Python ids (not NumPy scalars), so that messages show 'r1' rather than np.str_('r1').
+    ids = np.empty(len(starts), dtype=object)
+    ids[:] = groups[starts].tolist()
+    return Recordings(ids=ids, starts=starts, stops=stops)
 
 
 def _raise_not_contiguous(groups, block_codes, starts, stops):

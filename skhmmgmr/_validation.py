@@ -2,6 +2,8 @@
 
 import numpy as np
 
+from ._sequences import as_recordings
+
 
 def check_finite(values, *, name, column_names, recordings):
     """Raise a ValueError naming the first NaN or infinite entry of ``values``.
@@ -32,6 +34,27 @@ def check_finite(values, *, name, column_names, recordings):
         "non-finite value(s) in all). Fill or drop them before fitting or predicting: "
         "a NaN or infinity cannot be filtered."
     )
+
+
+def check_target_finite(y, groups):
+    """Name the column and recording of a NaN or infinite target before generic validation."""
+    try:
+        values = np.asarray(y, dtype=float)
+    except (TypeError, ValueError):
+        return
+    if values.ndim not in (1, 2) or np.isfinite(values).all():
+        return
+    if groups is not None and len(groups) != values.shape[0]:
+        return
+    values = values.reshape(values.shape[0], -1)
+    if hasattr(y, "columns"):
+        names = [str(c) for c in y.columns]
+    elif getattr(y, "name", None) is not None:
+        names = [str(y.name)]
+    else:
+        names = [f"output {i}" for i in range(values.shape[1])]
+    recordings = as_recordings(groups, values.shape[0])
+    check_finite(values, name="y", column_names=names, recordings=recordings)
 
 
 def column_names_of(estimator, n_columns, prefix="x"):

@@ -14,7 +14,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from ._em import INIT_METHODS, HMMParameters, fit_hmm, score_hmm
 from ._gmr import condition_on_inputs, conditional_means, filter_state_probabilities, mix_estimates
 from ._sequences import as_recordings
-from ._validation import check_finite, column_names_of
+from ._validation import check_finite, check_target_finite, column_names_of
 
 
 class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
@@ -150,6 +150,7 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         -------
         self : HMMGMRRegressor
         """
+        check_target_finite(y, groups)
         X, y = validate_data(
             self, X, y, multi_output=True, y_numeric=True, ensure_all_finite=False, dtype=float
         )
