@@ -2,6 +2,16 @@
 
 __version__ = "0.1.0.dev0"
 
+from . import datasets, metrics
 from .estimator import HMMGMRRegressor
+from .metrics import AccuracyScore, PerformanceScore, SmoothnessScore
 
-__all__ = ["HMMGMRRegressor", "__version__"]
+__all__ = [
+    "AccuracyScore",
+    "HMMGMRRegressor",
+    "PerformanceScore",
+    "SmoothnessScore",
+    "__version__",
+    "datasets",
+    "metrics",
+]

@@ -108,7 +108,13 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         "verbose": ["verbose"],
     }
 
-    __metadata_request__predict = {"return_std": metadata_routing.UNUSED}
+    # Recording ids are what makes the data sequences: with metadata routing enabled they are
+    # requested by default (as GroupKFold.split does), so that a search routes them to fit,
+    # predict, transform and score without set_*_request calls.
+    __metadata_request__fit = {"groups": True}
+    __metadata_request__predict = {"groups": True, "return_std": metadata_routing.UNUSED}
+    __metadata_request__transform = {"groups": True}
+    __metadata_request__score = {"groups": True}
 
     def __init__(
         self,
