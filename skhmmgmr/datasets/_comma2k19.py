@@ -1,0 +1,322 @@
+"""Steering data of the comma2k19 driving dataset, decoded from raw CAN frames.
+
+comma2k19 (comma.ai, MIT licence) is 33 hours of highway commute split into one-minute
+segments. Segments of chunks 1 and 2 come from a Toyota RAV4, whose CAN bus carries the
+driver's torque on the steering wheel; this module decodes it, together with the steering and
+vehicle-motion signals, with the Toyota DBC definitions.
+"""
+
+import numbers
+import re
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import pandas as pd
+from scipy.signal import savgol_filter
+
+from ._schema import DRIVER, FEATURE_UNITS, RECORDING, SETTING, SPLIT, TARGET, TIME
+
+BUS = 0
+DRIVER_NAME = "comma2k19"
+SPLIT_NAME = "unknown"
+TORQUE_UNIT = "raw sensor units"
+_SMOOTHING_SECONDS = 0.25
+
+
+class CANSignal(NamedTuple):
+    """A signal of a CAN message, as a DBC file defines it (big-endian bit order)."""
+
+    address: int
+    start_bit: int
+    length: int
+    signed: bool
+    scale: float
+    offset: float
+
+
+# Toyota DBC definitions (openpilot's toyota_*_pt). STEER_FRACTION, the 0.1 deg complement of
+# STEER_ANGLE, is needed: the processed CAN/steering_angle of comma2k19 is exactly their sum.
+STEER_TORQUE_DRIVER = CANSignal(0x260, 15, 16, True, 1.0, 0.0)
+STEER_TORQUE_EPS = CANSignal(0x260, 47, 16, True, 1.0, 0.0)
+YAW_RATE = CANSignal(0x24, 1, 10, False, 0.244, -125.0)
+ACCEL_Y = CANSignal(0x24, 33, 10, False, 0.03589, -18.375)
+STEER_ANGLE = CANSignal(0x25, 3, 12, True, 1.5, 0.0)
+STEER_FRACTION = CANSignal(0x25, 39, 4, True, 0.1, 0.0)
+STEER_RATE = CANSignal(0x25, 35, 12, True, 1.0, 0.0)
+
+_MESSAGE_NAMES = {0x260: "STEER_TORQUE_SENSOR", 0x24: "KINEMATICS", 0x25: "STEER_ANGLE_SENSOR"}
+_RAW_CAN = ("processed_log", "CAN", "raw_can")
+_SPEED = ("processed_log", "CAN", "speed")
+_REQUIRED_FILES = tuple(Path(*_RAW_CAN, name) for name in ("t", "address", "src", "data")) + (
+    Path(*_SPEED, "t"),
+    Path(*_SPEED, "value"),
+)
+
+ROUTE_PATTERN = re.compile(
+    r"^(?P<dongle>[0-9a-f]{16})(?:\||_|--)(?P<start>\d{4}-\d\d-\d\d--\d\d-\d\d-\d\d)$"
+)
+
+
+def decode_big_endian_signal(data, start_bit, length, *, signed=False, scale=1.0, offset=0.0):
+    """Decode a big-endian ("Motorola") signal from CAN payloads, for many frames at once.
+
+    Parameters
+    ----------
+    data : array-like of bytes of shape (n_frames,)
+        Payloads of at most 8 bytes (a NumPy ``|S8`` array, or a list of ``bytes``); shorter
+        payloads are padded with zero bytes. A ``uint8`` array of shape (n_frames, 8) works too.
+    start_bit : int
+        Position of the most significant bit of the signal, numbered as a DBC file writes it:
+        bit ``8 * k + j`` is bit ``j`` (0 = least significant) of byte ``k``.
+    length : int
+        Number of bits, 1 to 63.
+    signed : bool, default=False
+        Whether the raw value is two's complement.
+    scale, offset : float, default=1.0, 0.0
+        Physical value = raw value * scale + offset.
+
+    Returns
+    -------
+    values : ndarray of shape (n_frames,)
+        The physical values, as floats.
+
+    Examples
+    --------
+    >>> decode_big_endian_signal([b"\\x00\\xff\\xfe"], start_bit=15, length=16, signed=True)
+    array([-2.])
+    """
+    payload = np.asarray(data)
+    if not (payload.dtype == np.uint8 and payload.ndim == 2 and payload.shape[1] == 8):
+        if payload.dtype.kind == "O":
+            payload = payload.astype("S")
+        if payload.dtype.kind != "S" or payload.dtype.itemsize > 8:
+            raise ValueError(
+                "CAN payloads must be byte strings of at most 8 bytes or uint8 rows of 8 bytes, "
+                f"got an array of dtype {payload.dtype}."
+            )
+        payload = np.frombuffer(payload.astype("S8").tobytes(), dtype=np.uint8).reshape(-1, 8)
+    if not 0 <= start_bit < 64 or not 1 <= length < 64:
+        raise ValueError(f"Invalid signal: start bit {start_bit}, length {length}.")
+    # Byte 0 first makes the payload one big-endian integer, in which the bits of a Motorola
+    # signal are contiguous.
+    words = np.ascontiguousarray(payload).view(">u8").ravel().astype(np.uint64)
+    msb = 8 * (7 - start_bit // 8) + start_bit % 8
+    lsb = msb - length + 1
+    if lsb < 0:
+        raise ValueError(
+            f"A {length}-bit signal starting at bit {start_bit} does not fit in 8 bytes."
+        )
+    raw = ((words >> np.uint64(lsb)) & np.uint64((1 << length) - 1)).astype(np.int64)
+    if signed:
+        raw = np.where(raw >= 1 << (length - 1), raw - (1 << length), raw)
+    return raw * float(scale) + float(offset)
+
+
+def _decode(frames, signal):
+    times, data = frames[signal.address]
+    values = decode_big_endian_signal(
+        data,
+        signal.start_bit,
+        signal.length,
+        signed=signal.signed,
+        scale=signal.scale,
+        offset=signal.offset,
+    )
+    return times, values
+
+
+def _segment_name(path):
+    route = path.parent.name
+    match = ROUTE_PATTERN.match(route)
+    if match:
+        route = f"{match['dongle']}|{match['start']}"
+    return f"{route}--{path.name}"
+
+
+def check_sampling_rate(sampling_rate):
+    if (
+        not isinstance(sampling_rate, numbers.Real)
+        or isinstance(sampling_rate, bool)
+        or not np.isfinite(sampling_rate)
+        or sampling_rate <= 0
+    ):
+        raise ValueError(f"sampling_rate must be a positive number of Hz, got {sampling_rate!r}.")
+    return float(sampling_rate)
+
+
+def _read_frames(path):
+    raw_can = path.joinpath(*_RAW_CAN)
+    times, address, bus, data = (np.load(raw_can / n) for n in ("t", "address", "src", "data"))
+    frames = {}
+    for message, name in _MESSAGE_NAMES.items():
+        selected = np.flatnonzero((bus == BUS) & (address == message))
+        if selected.size < 2:
+            raise ValueError(
+                f"The segment {path} has no {name} frames (CAN id {message:#x}) on bus {BUS}. "
+                "Only the Toyota RAV4 segments of comma2k19 (chunks 1 and 2) can be decoded."
+            )
+        order = np.argsort(times[selected], kind="stable")
+        frames[message] = times[selected][order], data[selected][order]
+    return frames
+
+
+def load_comma2k19_segment(path, *, sampling_rate=20.0, recording=None, eps_torque=False):
+    """Load the steering signals of one comma2k19 segment on a uniform time grid.
+
+    The driver torque, steering angle and rate, yaw rate and lateral acceleration are decoded
+    from the raw CAN frames of bus 0 (the car's bus, where all these messages are; the panda's
+    other buses do not carry them), with the Toyota DBC definitions. The speed is the processed
+    ``CAN/speed`` signal (mean of the four wheel speeds). Every signal is linearly interpolated
+    onto a uniform grid over the time span all of them cover, then converted to SI units.
+
+    Angles, rates and accelerations follow ISO 8855: positive to the left (counter-clockwise
+    seen from above). The torques keep the sensor's sign, which on the example segment goes
+    with the steering angle (positive to the left). The phone IMU is not used: the CAN signals
+    measure the same quantities in the car's frame, whereas the phone's axes depend on how it
+    was mounted.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Segment folder, such as ``.../b0c9d2329ad1606b|2018-08-02--08-34-47/40`` (the ``|`` of
+        the route folder may also be written ``_`` or ``--``).
+    sampling_rate : float, default=20.0
+        Rate of the output time grid, in Hz. The CAN messages come at about 50 Hz (torque) and
+        83 Hz (steering, kinematics): a higher rate interpolates, it does not add information.
+    recording : str, default=None
+        Recording id of the rows; by default the segment name ``route--segment``, for example
+        ``"b0c9d2329ad1606b|2018-08-02--08-34-47--40"``.
+    eps_torque : bool, default=False
+        Whether to add the torque measured by the power-steering motor (``eps_torque``, raw
+        units). It results from the driver's torque and the assistance, so it is left out by
+        default.
+
+    Returns
+    -------
+    frame : pandas.DataFrame
+        One row per grid time: meta columns ``recording``, ``driver`` (``"comma2k19"``),
+        ``setting`` (NaN: the simulator's settings do not apply to a real car), ``split``
+        (``"unknown"``: comma2k19 defines no train/test split), ``time`` (s, from the first
+        grid time); the features ``steering_wheel_angle`` [rad],
+        ``steering_wheel_velocity`` [rad/s], ``steering_wheel_acceleration`` [rad/s^2],
+        ``lateral_acceleration`` [m/s^2], ``yaw_rate`` [rad/s], ``yaw_acceleration``
+        [rad/s^2], ``speed`` [m/s] (and ``eps_torque``); last the target ``driver_torque``
+        in **raw sensor units, not Nm** (openpilot takes more than 100 units for "the driver
+        is steering"). ``attrs["units"]`` gives every unit; ``attrs["time_origin"]`` maps
+        the recording id to the device boot time [s] of its first row, the clock of the other
+        files of the segment.
+
+    Notes
+    -----
+    The two accelerations are derivatives of the steering rate and yaw rate after a
+    Savitzky-Golay smoothing over 0.25 s. The lateral acceleration and yaw rate are the car's
+    own inertial sensor: uncalibrated, the yaw rate can be offset by a few tenths of a degree
+    per second, and the lateral acceleration includes gravity on a banked road. The lateral
+    velocity and slip angle are not given: they cannot be measured with these sensors, only
+    estimated with a vehicle model. The vehicle is a 2017 RAV4 (wheelbase 2.65 m, steering
+    ratio 16.88).
+
+    Examples
+    --------
+    >>> from skhmmgmr.datasets import load_comma2k19_segment
+    >>> df = load_comma2k19_segment("comma2k19/b0c9d2329ad1606b|2018-08-02--08-34-47/40")
+    ... # doctest: +SKIP
+    >>> df.attrs["units"]["driver_torque"]  # doctest: +SKIP
+    'raw sensor units'
+    """
+    sampling_rate = check_sampling_rate(sampling_rate)
+    path = Path(path)
+    if not path.is_dir():
+        raise FileNotFoundError(f"No comma2k19 segment folder at {str(path)!r}.")
+    missing = [str(path / f) for f in _REQUIRED_FILES if not (path / f).is_file()]
+    if missing:
+        raise FileNotFoundError(
+            f"The comma2k19 segment folder {str(path)!r} lacks the file(s) {', '.join(missing)}."
+        )
+    recording = _segment_name(path.resolve()) if recording is None else str(recording)
+
+    frames = _read_frames(path)
+    signals = {
+        "steering_wheel_angle": _sum(_decode(frames, STEER_ANGLE), _decode(frames, STEER_FRACTION)),
+        "steering_wheel_velocity": _decode(frames, STEER_RATE),
+        "yaw_rate": _decode(frames, YAW_RATE),
+        "lateral_acceleration": _decode(frames, ACCEL_Y),
+        "speed": _read_signal(path.joinpath(*_SPEED)),
+        TARGET: _decode(frames, STEER_TORQUE_DRIVER),
+    }
+    if eps_torque:
+        signals["eps_torque"] = _decode(frames, STEER_TORQUE_EPS)
+
+    start = max(t[0] for t, _ in signals.values())
+    stop = min(t[-1] for t, _ in signals.values())
+    n_samples = int(np.floor((stop - start) * sampling_rate + 1e-9)) + 1
+    window = max(5, 2 * int(round(_SMOOTHING_SECONDS * sampling_rate / 2)) + 1)
+    if stop <= start or n_samples < window:
+        raise ValueError(
+            f"The signals of the segment {str(path)!r} overlap on {max(stop - start, 0):.3f} s "
+            f"only: too short for a grid at {sampling_rate} Hz."
+        )
+    grid = start + np.arange(n_samples) / sampling_rate
+    on_grid = {name: np.interp(grid, t, v) for name, (t, v) in signals.items()}
+
+    deg = np.pi / 180.0
+    columns = {
+        RECORDING: recording,
+        DRIVER: DRIVER_NAME,
+        SETTING: np.nan,
+        SPLIT: SPLIT_NAME,
+        TIME: grid - start,
+        "steering_wheel_angle": on_grid["steering_wheel_angle"] * deg,
+        "steering_wheel_velocity": on_grid["steering_wheel_velocity"] * deg,
+    }
+    columns["steering_wheel_acceleration"] = _derivative(
+        columns["steering_wheel_velocity"], sampling_rate, window
+    )
+    # ACCEL_Y is positive to the right: it anticorrelates with speed * yaw rate.
+    columns["lateral_acceleration"] = -on_grid["lateral_acceleration"]
+    columns["yaw_rate"] = on_grid["yaw_rate"] * deg
+    columns["yaw_acceleration"] = _derivative(columns["yaw_rate"], sampling_rate, window)
+    columns["speed"] = on_grid["speed"]
+    if eps_torque:
+        columns["eps_torque"] = on_grid["eps_torque"]
+    columns[TARGET] = on_grid[TARGET]
+
+    frame = pd.DataFrame(columns)
+    frame.attrs["units"] = _units(eps_torque)
+    frame.attrs["time_origin"] = {recording: float(start)}
+    return frame
+
+
+def _sum(first, second):
+    (times, a), (_, b) = first, second
+    return times, a + b
+
+
+def _read_signal(folder):
+    times = np.load(folder / "t")
+    values = np.load(folder / "value").reshape(len(times), -1)[:, 0]
+    order = np.argsort(times, kind="stable")
+    return times[order], values[order]
+
+
+def _derivative(values, sampling_rate, window):
+    return savgol_filter(values, window, polyorder=2, deriv=1, delta=1.0 / sampling_rate)
+
+
+def _units(eps_torque):
+    units = {TIME: "s"}
+    for name in (
+        "steering_wheel_angle",
+        "steering_wheel_velocity",
+        "steering_wheel_acceleration",
+        "lateral_acceleration",
+        "yaw_rate",
+        "yaw_acceleration",
+    ):
+        units[name] = FEATURE_UNITS[name]
+    units["speed"] = "m/s"
+    if eps_torque:
+        units["eps_torque"] = TORQUE_UNIT
+    units[TARGET] = TORQUE_UNIT
+    return units

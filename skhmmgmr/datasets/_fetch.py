@@ -1,0 +1,494 @@
+"""Download, verify and unpack dataset archives without ever leaving a half-written file.
+
+Also the fetcher of the comma2k19 driving dataset, built on these helpers.
+"""
+
+import hashlib
+import numbers
+import os
+import re
+import shutil
+import tarfile
+import tempfile
+import warnings
+import zipfile
+from http.client import IncompleteRead
+from pathlib import Path, PurePosixPath
+from urllib.error import HTTPError, URLError
+from urllib.parse import urljoin, urlsplit
+from urllib.request import urlopen
+
+import pandas as pd
+
+from ._base import get_data_home
+from ._comma2k19 import ROUTE_PATTERN, check_sampling_rate, load_comma2k19_segment
+
+_CHUNK_SIZE = 1 << 20
+_SCHEMES = ("http", "https", "file")
+_SHA256 = re.compile(r"^[0-9a-fA-F]{64}$")
+
+COMMA2K19_URL = "https://huggingface.co/datasets/commaai/comma2k19/resolve/main/"
+N_CHUNKS = 10
+_SEGMENT_ID = re.compile(
+    r"^(?P<dongle>[0-9a-f]{16})(?:\||_|--)(?P<start>\d{4}-\d\d-\d\d--\d\d-\d\d-\d\d)"
+    r"(?:/|--)(?P<number>\d+)/?$"
+)
+
+
+def _check_url(url):
+    scheme = urlsplit(url).scheme
+    if scheme not in _SCHEMES:
+        raise ValueError(f"Cannot download {url!r}: only {', '.join(_SCHEMES)} URLs are supported.")
+
+
+def _check_sha256(sha256, name):
+    if not isinstance(sha256, str) or not _SHA256.match(sha256):
+        raise ValueError(
+            f"The SHA-256 checksum given for {name!r} must be 64 hexadecimal digits, "
+            f"got {sha256!r}."
+        )
+    return sha256.lower()
+
+
+def file_url(base_url, name):
+    """Return the URL of the file ``name`` in the folder ``base_url``."""
+    if not base_url.endswith("/"):
+        base_url += "/"
+    return urljoin(base_url, name)
+
+
+def download(url, path, *, sha256=None, timeout=60.0):
+    """Download ``url`` to ``path`` through a temporary file in the same folder.
+
+    The bytes go to a hidden temporary file next to ``path``, which is renamed to ``path``
+    (atomically) only once the whole body was received and, when ``sha256`` is given, its
+    checksum matches. On any failure, including a ``KeyboardInterrupt``, the temporary file is
+    deleted, so ``path`` either does not exist or holds the complete, verified file.
+
+    Parameters
+    ----------
+    url : str
+        An ``http``, ``https`` or ``file`` URL.
+    path : str or path-like
+        Where the file goes; its folder is created if needed.
+    sha256 : str, default=None
+        Expected hexadecimal SHA-256 digest of the file; not checked when None.
+    timeout : float, default=60.0
+        Seconds to wait for the server at each read.
+
+    Returns
+    -------
+    sha256 : str
+        Hexadecimal SHA-256 digest of the downloaded file.
+    """
+    _check_url(url)
+    path = Path(path)
+    expected = None if sha256 is None else _check_sha256(sha256, path.name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    try:
+        digest = hashlib.sha256()
+        n_bytes = 0
+        with os.fdopen(fd, "wb") as tmp, urlopen(url, timeout=timeout) as response:
+            length = response.headers.get("Content-Length")
+            try:
+                for block in iter(lambda: response.read(_CHUNK_SIZE), b""):
+                    tmp.write(block)
+                    digest.update(block)
+                    n_bytes += len(block)
+            except IncompleteRead as exc:
+                n_bytes += len(exc.partial)
+        if length is not None and n_bytes != int(length):
+            raise OSError(
+                f"Download of {url!r} stopped after {n_bytes} of {int(length)} bytes; "
+                "nothing was kept. Try again."
+            )
+        actual = digest.hexdigest()
+        if expected is not None and actual != expected:
+            raise OSError(
+                f"Checksum mismatch for {url!r}: expected SHA-256 {expected}, got {actual}. "
+                "The file is corrupted or is not the expected version; nothing was kept."
+            )
+        os.replace(tmp_name, path)
+    except BaseException:
+        Path(tmp_name).unlink(missing_ok=True)
+        raise
+    return actual
+
+
+def read_manifest(base_url, name="SHA256SUMS", *, timeout=60.0):
+    """Read a checksum manifest in ``sha256sum`` format from the folder ``base_url``.
+
+    Returns a mapping file name -> hexadecimal SHA-256 digest, or None when the folder has no
+    manifest.
+    """
+    url = file_url(base_url, name)
+    _check_url(url)
+    try:
+        with urlopen(url, timeout=timeout) as response:
+            text = response.read().decode("utf-8")
+    except HTTPError as exc:
+        if exc.code == 404:
+            return None
+        raise
+    except URLError as exc:
+        if isinstance(exc.reason, FileNotFoundError):
+            return None
+        raise
+    checksums = {}
+    for line_number, line in enumerate(text.splitlines(), start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        parts = line.split(maxsplit=1)
+        if len(parts) != 2:
+            raise ValueError(f"Line {line_number} of the manifest {url!r} is malformed: {line!r}.")
+        digest, file_name = parts
+        checksums[file_name.strip().lstrip("*")] = _check_sha256(digest, file_name)
+    return checksums
+
+
+def _member_parts(name, archive):
+    """Split an archive member name into path parts, refusing names that escape the folder."""
+    posix = PurePosixPath(name.replace("\\", "/"))
+    parts = [p for p in posix.parts if p not in ("", ".")]
+    if posix.is_absolute() or ".." in parts or (parts and re.match(r"^[A-Za-z]:$", parts[0])):
+        raise ValueError(
+            f"Refusing to unpack {archive}: its member {name!r} would be written outside the "
+            "target folder."
+        )
+    return tuple(parts)
+
+
+def list_members(archive):
+    """Return the path parts of every regular file in a zip or tar archive.
+
+    Raises a ValueError if any member name is absolute or contains ``..``.
+    """
+    archive = Path(archive)
+    if zipfile.is_zipfile(archive):
+        with zipfile.ZipFile(archive) as zf:
+            infos = zf.infolist()
+            return [_member_parts(i.filename, archive.name) for i in infos if not i.is_dir()]
+    if tarfile.is_tarfile(archive):
+        with tarfile.open(archive) as tf:
+            members = tf.getmembers()
+            for m in members:
+                _member_parts(m.name, archive.name)
+            return [_member_parts(m.name, archive.name) for m in members if m.isfile()]
+    raise ValueError(f"{archive} is neither a zip nor a tar archive.")
+
+
+def extract(archive, destinations):
+    """Unpack selected regular files of a zip or tar archive.
+
+    Parameters
+    ----------
+    archive : path-like
+        The zip or tar (optionally compressed) archive.
+    destinations : callable
+        Called with the path parts of every regular file; returns the path where the file
+        goes, or None to skip it. Links and special files are never unpacked.
+
+    Notes
+    -----
+    The caller writes into a fresh temporary folder and renames it into place, so that a
+    failure never leaves a partly unpacked folder where the cache expects a complete one.
+    """
+    archive = Path(archive)
+    if zipfile.is_zipfile(archive):
+        with zipfile.ZipFile(archive) as zf:
+            for info in zf.infolist():
+                if info.is_dir():
+                    continue
+                # A zip written on Unix can mark a member as a symbolic link.
+                if (info.external_attr >> 16) & 0o170000 == 0o120000:
+                    continue
+                target = destinations(_member_parts(info.filename, archive.name))
+                if target is not None:
+                    _copy_member(zf.open(info), target)
+        return
+    if tarfile.is_tarfile(archive):
+        with tarfile.open(archive) as tf:
+            for member in tf:
+                parts = _member_parts(member.name, archive.name)
+                if not member.isfile():
+                    continue
+                target = destinations(parts)
+                if target is not None:
+                    _copy_member(tf.extractfile(member), target)
+        return
+    raise ValueError(f"{archive} is neither a zip nor a tar archive.")
+
+
+def _copy_member(source, target):
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with source, open(target, "wb") as out:
+        shutil.copyfileobj(source, out, _CHUNK_SIZE)
+
+
+def _segment_key(identifier):
+    match = _SEGMENT_ID.match(str(identifier))
+    if match is None:
+        raise ValueError(
+            f"{identifier!r} is not a comma2k19 segment identifier such as "
+            "'b0c9d2329ad1606b|2018-08-02--08-34-47/40' (or '...--40')."
+        )
+    return match["dongle"], match["start"], str(int(match["number"]))
+
+
+def _key_of_member(parts):
+    """Return (segment key, path inside the segment) of an archive member, or None."""
+    for i in range(len(parts) - 2):
+        match = ROUTE_PATTERN.match(parts[i])
+        if match and parts[i + 1].isdigit():
+            key = match["dongle"], match["start"], str(int(parts[i + 1]))
+            return key, parts[i + 2 :]
+    return None
+
+
+def _segment_folder(root, key):
+    dongle, start, number = key
+    return root / f"{dongle}--{start}" / number
+
+
+def _name(key):
+    dongle, start, number = key
+    return f"{dongle}|{start}--{number}"
+
+
+def _check_chunks(chunks):
+    chunks = [chunks] if isinstance(chunks, numbers.Integral) else list(chunks)
+    for chunk in chunks:
+        if not isinstance(chunk, numbers.Integral) or not 1 <= chunk <= N_CHUNKS:
+            raise ValueError(f"chunks must be numbers from 1 to {N_CHUNKS}, got {chunk!r}.")
+    if not chunks:
+        raise ValueError("chunks must name at least one chunk.")
+    return [int(c) for c in dict.fromkeys(chunks)]
+
+
+class _Chunks:
+    """Archives of comma2k19 chunks in the cache folder, downloaded on demand."""
+
+    def __init__(self, root, base_url, checksums, download_if_missing, timeout):
+        self.root = root
+        self.base_url = base_url
+        self.checksums = checksums
+        self.download_if_missing = download_if_missing
+        self.timeout = timeout
+
+    def index_path(self, chunk):
+        return self.root / f"Chunk_{chunk}.segments.txt"
+
+    def read_index(self, chunk):
+        path = self.index_path(chunk)
+        if not path.is_file():
+            return None
+        return [_segment_key(line) for line in path.read_text().split() if line]
+
+    def archive(self, chunk):
+        name = f"Chunk_{chunk}.zip"
+        path = self.root / name
+        if path.is_file():
+            return path
+        if not self.download_if_missing:
+            raise OSError(
+                f"The comma2k19 archive {name} is needed but not in the cache folder "
+                f"{str(self.root)!r}, and download_if_missing=False."
+            )
+        if self.checksums is None:
+            self.checksums = read_manifest(self.base_url, timeout=self.timeout) or {}
+        expected = self.checksums.get(name)
+        digest = download(
+            file_url(self.base_url, name), path, sha256=expected, timeout=self.timeout
+        )
+        if expected is None:
+            warnings.warn(
+                f"No SHA-256 checksum is known for {name}, so its download was not verified "
+                f"(its SHA-256 is {digest}; pass checksums={{{name!r}: ...}} to pin it).",
+                UserWarning,
+                stacklevel=3,
+            )
+        return path
+
+    def unpack(self, chunk, wanted):
+        """Unpack the segments in ``wanted`` (None: all) of a chunk; return its segment keys."""
+        archive = self.archive(chunk)
+        members = [m for m in map(_key_of_member, list_members(archive)) if m is not None]
+        keys = list(dict.fromkeys(key for key, _ in members))
+        self._write_index(chunk, keys)
+        todo = {
+            k
+            for k in keys
+            if (wanted is None or k in wanted) and not _segment_folder(self.root, k).is_dir()
+        }
+        if not todo:
+            return keys
+        # Unpack into a hidden folder first: a segment folder in the cache is always complete.
+        tmp = Path(tempfile.mkdtemp(prefix=".unpacking-", dir=self.root))
+        try:
+
+            def destination(parts):
+                found = _key_of_member(parts)
+                if found is None or found[0] not in todo or not found[1]:
+                    return None
+                return _segment_folder(tmp, found[0]).joinpath(*found[1])
+
+            extract(archive, destination)
+            for key in todo:
+                final = _segment_folder(self.root, key)
+                final.parent.mkdir(parents=True, exist_ok=True)
+                try:
+                    _segment_folder(tmp, key).rename(final)
+                except OSError:
+                    if not final.is_dir():  # else another process unpacked it meanwhile
+                        raise
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        return keys
+
+    def _write_index(self, chunk, keys):
+        path = self.index_path(chunk)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=self.root)
+        try:
+            with open(fd, "w") as f:
+                f.write("".join(f"{_name(k)}\n" for k in keys))
+            Path(tmp).replace(path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
+
+def fetch_comma2k19(
+    *,
+    segments=None,
+    chunks=1,
+    data_home=None,
+    download_if_missing=True,
+    base_url=COMMA2K19_URL,
+    checksums=None,
+    keep_archive=True,
+    sampling_rate=20.0,
+    eps_torque=False,
+    timeout=60.0,
+):
+    """Download (if needed) and load segments of the comma2k19 dataset.
+
+    comma2k19 (comma.ai, MIT licence) is published as ten zip archives ``Chunk_1.zip`` to
+    ``Chunk_10.zip`` of about 9 GB each; this function downloads a whole chunk into the cache
+    folder, unpacks the requested segments into ``<data_home>/comma2k19/<route>/<segment>/``
+    and loads each with :func:`load_comma2k19_segment`. Segments already unpacked are loaded
+    without touching the network. Only chunks 1 and 2 (the Toyota RAV4) have the driver torque.
+
+    Parameters
+    ----------
+    segments : str or list of str, default=None
+        Segments to load, named ``"<dongle_id>|<route start>/<segment>"`` (``--`` may stand for
+        ``|`` and for ``/``), for example ``"b0c9d2329ad1606b|2018-08-02--08-34-47/40"``.
+        By default every segment of the chunks.
+    chunks : int or list of int, default=1
+        Chunks, from 1 to 10, to look for the segments in; downloaded in this order, and only
+        until every requested segment is found.
+    data_home : str or path-like, default=None
+        Cache folder; see :func:`get_data_home`.
+    download_if_missing : bool, default=True
+        If False, raise an OSError instead of downloading what is not in the cache.
+    base_url : str, default=COMMA2K19_URL
+        Folder URL holding the ``Chunk_<n>.zip`` archives (``http``, ``https`` or ``file``).
+        The default is comma.ai's copy on the Hugging Face Hub
+        (``https://huggingface.co/datasets/commaai/comma2k19/resolve/main/``); the dataset is
+        also shared on Academic Torrents, which needs a BitTorrent client: download a chunk
+        there and pass ``base_url="file:///folder/of/the/chunks/"``.
+    checksums : mapping of str to str, default=None
+        Expected SHA-256 of archives, by file name (``{"Chunk_1.zip": "3f2a..."}``). By default
+        they are read from a ``SHA256SUMS`` file (``sha256sum`` format) in ``base_url``; when
+        there is none (as on the Hugging Face Hub), the download is not verified and a warning
+        gives the SHA-256 of what was downloaded. A mismatch raises an OSError and keeps
+        nothing.
+    keep_archive : bool, default=True
+        Whether to keep the archive in the cache to unpack other segments later without
+        downloading it again.
+    sampling_rate : float, default=20.0
+        Rate of the time grid, in Hz; see :func:`load_comma2k19_segment`.
+    eps_torque : bool, default=False
+        Whether to add the power-steering motor torque; see :func:`load_comma2k19_segment`.
+    timeout : float, default=60.0
+        Seconds to wait for the server at each read.
+
+    Returns
+    -------
+    frame : pandas.DataFrame
+        The segments one after the other, in the order asked (by default the archive order),
+        each a recording named ``route--segment``; columns as in
+        :func:`load_comma2k19_segment`.
+
+    Notes
+    -----
+    Downloads go to a temporary file in the cache folder, renamed into place only once
+    complete and verified; segments are unpacked into a temporary folder renamed into place,
+    so an interruption never leaves a partial file where the cache expects a complete one.
+    Archive members that would land outside the cache folder are refused.
+
+    Examples
+    --------
+    >>> from skhmmgmr.datasets import fetch_comma2k19
+    >>> df = fetch_comma2k19(segments="b0c9d2329ad1606b|2018-07-27--06-03-57/3")
+    ... # doctest: +SKIP
+    """
+    check_sampling_rate(sampling_rate)
+    chunk_numbers = _check_chunks(chunks)
+    if checksums is not None:
+        checksums = dict(checksums)
+    root = Path(get_data_home(data_home)) / "comma2k19"
+    root.mkdir(parents=True, exist_ok=True)
+    store = _Chunks(root, base_url, checksums, download_if_missing, timeout)
+
+    if segments is None:
+        keys = []
+        for chunk in chunk_numbers:
+            index = store.read_index(chunk)
+            if index is None or not all(_segment_folder(root, k).is_dir() for k in index):
+                index = store.unpack(chunk, None)
+                _drop_archive(store, chunk, keep_archive)
+            keys.extend(index)
+    else:
+        identifiers = [segments] if isinstance(segments, str) else list(segments)
+        keys = list(dict.fromkeys(_segment_key(s) for s in identifiers))
+        for chunk in chunk_numbers:
+            remaining = {k for k in keys if not _segment_folder(root, k).is_dir()}
+            if not remaining:
+                break
+            index = store.read_index(chunk)
+            if index is not None and not remaining & set(index):
+                continue
+            store.unpack(chunk, remaining)
+            _drop_archive(store, chunk, keep_archive)
+        remaining = [_name(k) for k in keys if not _segment_folder(root, k).is_dir()]
+        if remaining:
+            raise ValueError(
+                f"Segment(s) {', '.join(remaining)} are in none of the comma2k19 chunk(s) "
+                f"{', '.join(map(str, chunk_numbers))}."
+            )
+
+    parts = [
+        load_comma2k19_segment(
+            _segment_folder(root, k),
+            sampling_rate=sampling_rate,
+            recording=_name(k),
+            eps_torque=eps_torque,
+        )
+        for k in keys
+    ]
+    if not parts:
+        raise ValueError(f"The comma2k19 chunk(s) {chunk_numbers} hold no segment.")
+    frame = pd.concat(parts, ignore_index=True)
+    frame.attrs = {
+        "units": dict(parts[0].attrs["units"]),
+        "time_origin": {k: v for p in parts for k, v in p.attrs["time_origin"].items()},
+    }
+    return frame
+
+
+def _drop_archive(store, chunk, keep_archive):
+    if not keep_archive:
+        (store.root / f"Chunk_{chunk}.zip").unlink(missing_ok=True)

@@ -1,0 +1,170 @@
+"""Tests of load_recordings on CSV, Parquet and DataFrame inputs."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from skhmmgmr.datasets import load_recordings
+
+
+def _recording(n=5, rate=10.0, start=0.0, seed=0):
+    rng = np.random.default_rng(seed)
+    return pd.DataFrame(
+        {
+            "time": start + np.arange(n) / rate,
+            "steering_wheel_angle": rng.normal(size=n),
+            "yaw_rate": rng.normal(size=n),
+            "driver_torque": rng.normal(size=n),
+        }
+    )
+
+
+def test_one_file_per_recording_csv_and_parquet(tmp_path):
+    _recording(seed=1).to_csv(tmp_path / "monday.csv", index=False)
+    _recording(n=3, seed=2).to_parquet(tmp_path / "tuesday.parquet")
+    frame = load_recordings([tmp_path / "monday.csv", tmp_path / "tuesday.parquet"])
+    assert list(frame.columns) == [
+        "recording", "driver", "setting", "split", "time",
+        "steering_wheel_angle", "yaw_rate", "driver_torque",
+    ]  # fmt: skip
+    assert frame["recording"].tolist() == ["monday"] * 5 + ["tuesday"] * 3
+    assert (frame["driver"] == "unknown").all() and (frame["split"] == "unknown").all()
+    assert frame["setting"].isna().all()
+    np.testing.assert_allclose(frame["yaw_rate"].iloc[5:], _recording(n=3, seed=2)["yaw_rate"])
+    assert frame.attrs["units"] == {
+        "time": "s",
+        "steering_wheel_angle": "rad",
+        "yaw_rate": "rad/s",
+        "driver_torque": "Nm",
+    }
+    # A folder gives its files in name order.
+    assert load_recordings(tmp_path).equals(frame)
+
+
+def test_recording_column_custom_names_and_units():
+    raw = pd.concat(
+        [_recording(seed=1).assign(run=7), _recording(seed=2).assign(run=8)], ignore_index=True
+    ).rename(columns={"time": "t", "driver_torque": "tau", "yaw_rate": "r"})
+    raw["driver"] = "anna"
+    frame = load_recordings(
+        raw,
+        recording="run",
+        time="t",
+        target="tau",
+        features=["r", "steering_wheel_angle"],
+        sampling_rate=10.0,
+        units={"r": "rad/s", "tau": "raw"},
+    )
+    assert list(frame.columns[4:]) == ["time", "r", "steering_wheel_angle", "driver_torque"]
+    assert frame["recording"].tolist() == ["7"] * 5 + ["8"] * 5
+    assert (frame["driver"] == "anna").all()
+    assert frame.attrs["units"] == {
+        "time": "s",
+        "r": "rad/s",
+        "steering_wheel_angle": "rad",
+        "driver_torque": "raw",
+    }
+    assert load_recordings(raw, recording="run", time="t", target="tau", features="r").shape == (
+        10,
+        7,
+    )
+
+
+def test_interleaved_recordings_are_gathered_stably():
+    a, b = _recording(seed=1).assign(recording="b"), _recording(seed=2).assign(recording="a")
+    raw = pd.concat([a, b]).sort_values("time", kind="stable").reset_index(drop=True)
+    frame = load_recordings(raw)
+    assert frame["recording"].tolist() == ["b"] * 5 + ["a"] * 5
+    np.testing.assert_allclose(frame["driver_torque"].iloc[:5], a["driver_torque"])
+    np.testing.assert_allclose(frame["time"].iloc[5:], b["time"])
+
+
+def test_missing_columns_are_listed_with_available_ones(tmp_path):
+    _recording().drop(columns="driver_torque").to_csv(tmp_path / "r1.csv", index=False)
+    with pytest.raises(ValueError, match=r"r1\.csv.*\['driver_torque'\].*'yaw_rate'"):
+        load_recordings(tmp_path / "r1.csv")
+    with pytest.raises(ValueError, match=r"\['recording', 'lane'\]"):
+        load_recordings(_recording(), features=["yaw_rate", "lane"])
+
+
+def test_unsorted_time_is_named(tmp_path):
+    raw = _recording()
+    raw.loc[3, "time"] = 0.05
+    raw.to_parquet(tmp_path / "r2.parquet")
+    with pytest.raises(ValueError, match=r"'r2'.*r2\.parquet.*row 3, time 0\.05.*back in time"):
+        load_recordings(tmp_path / "r2.parquet")
+
+
+def test_duplicated_time_is_named():
+    raw = _recording().assign(recording="x")
+    raw.loc[2, "time"] = raw.loc[1, "time"]
+    with pytest.raises(ValueError, match=r"'x'.*row 2.*repeats the time"):
+        load_recordings(raw)
+
+
+@pytest.mark.parametrize("bad, kind", [(np.nan, "NaN"), (np.inf, "an infinite value")])
+def test_non_finite_values_are_named(bad, kind):
+    raw = pd.concat(
+        [_recording().assign(recording="ok"), _recording().assign(recording="bad")],
+        ignore_index=True,
+    )
+    raw.loc[8, "yaw_rate"] = bad
+    raw.loc[9, "driver_torque"] = bad
+    with pytest.raises(ValueError, match=rf"'yaw_rate' holds {kind}.*'bad'.*row 8, time 0\.3"):
+        load_recordings(raw)
+
+
+def test_non_uniform_sampling_is_refused_only_when_a_rate_is_given():
+    raw = _recording(n=6).assign(recording="jittery")
+    raw.loc[4:, "time"] += 0.03
+    assert len(load_recordings(raw)) == 6
+    with pytest.raises(ValueError, match=r"'jittery' is not sampled at 10\.0 Hz.*row 4"):
+        load_recordings(raw, sampling_rate=10.0)
+    with pytest.raises(ValueError, match="sampling_rate"):
+        load_recordings(raw, sampling_rate=0)
+
+
+def test_recording_in_two_files_and_clashing_stems(tmp_path):
+    _recording().assign(recording="same").to_csv(tmp_path / "one.csv", index=False)
+    _recording().assign(recording="same").to_csv(tmp_path / "two.csv", index=False)
+    with pytest.raises(ValueError, match=r"'same' is in more than one source.*one\.csv.*two\.csv"):
+        load_recordings(tmp_path)
+    (tmp_path / "sub").mkdir()
+    _recording().to_csv(tmp_path / "sub" / "one.csv", index=False)
+    with pytest.raises(ValueError, match="would both be recording 'one'"):
+        load_recordings([tmp_path / "one.csv", tmp_path / "sub" / "one.csv"])
+
+
+def test_features_must_agree_across_files(tmp_path):
+    _recording().to_csv(tmp_path / "a.csv", index=False)
+    _recording().drop(columns="yaw_rate").to_csv(tmp_path / "b.csv", index=False)
+    with pytest.raises(ValueError, match=r"b\.csv.*differ.*a\.csv"):
+        load_recordings(tmp_path)
+    frame = load_recordings(tmp_path, features=["steering_wheel_angle"])
+    assert frame["recording"].unique().tolist() == ["a", "b"]
+
+
+def test_bad_inputs(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nowhere.csv"):
+        load_recordings(tmp_path / "nowhere.csv")
+    (tmp_path / "notes.txt").write_text("x")
+    with pytest.raises(ValueError, match="CSV"):
+        load_recordings(tmp_path / "notes.txt")
+    with pytest.raises(ValueError, match="no CSV or Parquet"):
+        load_recordings(tmp_path)
+    with pytest.raises(ValueError, match="No recordings"):
+        load_recordings([])
+    with pytest.raises(ValueError, match=r"\['comment'\] .* not numeric"):
+        load_recordings(_recording().assign(recording="r", comment="hi"))
+
+
+def test_meta_columns_are_not_features_and_recording_ids_are_required():
+    raw = _recording().assign(recording="r").rename(columns={"time": "t"})
+    raw["time"] = 1.0  # a stray column named like the schema's time
+    frame = load_recordings(raw, time="t")
+    assert list(frame.columns[5:]) == ["steering_wheel_angle", "yaw_rate", "driver_torque"]
+    with pytest.raises(ValueError, match="cannot be features"):
+        load_recordings(raw, time="t", features=["yaw_rate", "time"])
+    raw.loc[2, "recording"] = None
+    with pytest.raises(ValueError, match="'recording' of the DataFrame is empty in row 2"):
+        load_recordings(raw, time="t")
