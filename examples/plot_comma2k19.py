@@ -16,12 +16,12 @@ train the model and the last two test it, filtered recording by recording.
 import os
 from pathlib import Path
 
-import matplotlib.pyplot as plt
 import numpy as np
 
 from skhmmgmr import HMMGMRRegressor
 from skhmmgmr.datasets import RECORDING, TARGET, TIME, load_comma2k19_segment
 from skhmmgmr.metrics import evaluate_recordings
+from skhmmgmr.plotting import plot_estimate
 
 
 def find_segment():
@@ -66,21 +66,15 @@ print(data.groupby(RECORDING)[TARGET].std().round(1).rename("torque SD").to_stri
 # %%
 # Estimate, predictive band and filtered state probabilities
 # -----------------------------------------------------------
-time = test[TIME].to_numpy()
-fig, (ax_torque, ax_states) = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
-ax_torque.plot(time, test[TARGET], color="black", lw=1, label="measured")
-ax_torque.plot(time, estimate, color="tab:blue", lw=1, label="HMM-GMR estimate")
-ax_torque.fill_between(
-    time, estimate - 2 * std, estimate + 2 * std, color="tab:blue", alpha=0.2, label="+-2 std"
+fig, axes = plot_estimate(
+    test[TIME].to_numpy(),
+    test[TARGET].to_numpy(),
+    estimate,
+    std=std,
+    state_proba=state_proba,
+    torque_unit="raw units",
+    title="comma2k19, test chunks",
 )
-ax_torque.set_ylabel("driver torque [raw units]")
-ax_torque.legend(loc="upper right", fontsize="small")
-ax_states.stackplot(time, state_proba.T, labels=[f"state {k}" for k in range(3)])
-ax_states.set_ylabel("filtered state\nprobability")
-ax_states.set_xlabel("time [s]")
-ax_states.legend(loc="upper right", fontsize="small")
-fig.tight_layout()
 
 coverage = np.mean(np.abs(test[TARGET].to_numpy() - estimate) <= 2 * std)
 print(f"share of test samples inside the +-2 std band: {coverage:.2f}")
-plt.show()
