@@ -383,6 +383,129 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         log_likelihood = self.log_likelihood(X, y, groups=groups)
         return -2.0 * log_likelihood + self.n_parameters() * np.log(len(X))
 
+    def filter_stream(self, **kwargs):
+        """Sample-by-sample causal filter for real-time use.
+
+        Parameters
+        ----------
+        **kwargs : dict
+            Passed to :class:`~skhmmgmr.FilterStream` (``min_log_density``).
+
+        Returns
+        -------
+        stream : FilterStream
+            Call ``stream.update(sample)`` once per sample and ``stream.reset()`` at the start
+            of every recording; the estimates equal those of :meth:`predict`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from skhmmgmr import HMMGMRRegressor
+        >>> X = np.cumsum(np.random.default_rng(0).normal(size=(300, 2)), axis=0) / 10
+        >>> model = HMMGMRRegressor(n_states=2, random_state=0).fit(X, X[:, 0] - X[:, 1])
+        >>> stream = model.filter_stream()
+        >>> bool(abs(stream.update(X[0]) - model.predict(X[:1])[0]) < 1e-12)
+        True
+        """
+        from .streaming import FilterStream
+
+        return FilterStream(self, **kwargs)
+
+    def to_dict(self, *, output_names=None):
+        """The fitted model as a JSON-ready dict (the portable model format).
+
+        The dict holds everything the causal filter needs (see :mod:`skhmmgmr.portable` for
+        the keys and their units) and everything :meth:`from_dict` needs to restore the
+        estimator.
+
+        Parameters
+        ----------
+        output_names : list of str, default=None
+            Names of the outputs; ``output_0``, ... when None.
+
+        Returns
+        -------
+        data : dict
+            Nested dicts, lists, strings and finite numbers only.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from skhmmgmr import HMMGMRRegressor
+        >>> X = np.cumsum(np.random.default_rng(0).normal(size=(200, 2)), axis=0)
+        >>> model = HMMGMRRegressor(n_states=2, random_state=0).fit(X, X.sum(axis=1))
+        >>> restored = HMMGMRRegressor.from_dict(model.to_dict(output_names=["torque"]))
+        >>> bool(np.array_equal(restored.predict(X), model.predict(X)))
+        True
+        """
+        from .portable import to_dict
+
+        check_is_fitted(self)
+        return to_dict(self, output_names=output_names)
+
+    def export_json(self, path, *, output_names=None):
+        """Write the portable model file (strict JSON) to ``path``.
+
+        Parameters
+        ----------
+        path : str or path-like
+        output_names : list of str, default=None
+            Names of the outputs; ``output_0``, ... when None.
+
+        See Also
+        --------
+        from_json : restore the estimator from the file.
+        """
+        from .portable import export_json
+
+        check_is_fitted(self)
+        export_json(self, path, output_names=output_names)
+
+    @classmethod
+    def from_dict(cls, data):
+        """Restore a fitted estimator from :meth:`to_dict` output.
+
+        Parameters
+        ----------
+        data : dict
+
+        Returns
+        -------
+        model : HMMGMRRegressor
+            Fitted; predicts as the exported model did.
+
+        Raises
+        ------
+        ValueError
+            If ``data`` is not a dict, lacks a key, has a wrong shape, non-finite numbers or
+            inconsistent parameters, or is of another format version; the message names the
+            key.
+        """
+        from .portable import from_dict
+
+        return from_dict(data, cls)
+
+    @classmethod
+    def from_json(cls, path):
+        """Restore a fitted estimator from a file written by :meth:`export_json`.
+
+        Parameters
+        ----------
+        path : str or path-like
+
+        Returns
+        -------
+        model : HMMGMRRegressor
+
+        Raises
+        ------
+        ValueError
+            If the file is not valid JSON or not a valid model file (see :meth:`from_dict`).
+        """
+        from .portable import from_dict, load_json
+
+        return from_dict(load_json(path), cls)
+
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.target_tags.required = True

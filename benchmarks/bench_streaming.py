@@ -1,0 +1,61 @@
+"""Latency of one streaming update against ``predict`` on a one-row array.
+
+Fits a K=5, 3-input HMM-GMR model on generated recordings, then times 20,000 single calls of
+``FilterStream.update`` and 2,000 of ``model.predict`` with ``time.perf_counter_ns``, and
+prints the median and 99th percentile in microseconds. Run with::
+
+    python benchmarks/bench_streaming.py
+"""
+
+import time
+
+import numpy as np
+
+from skhmmgmr import HMMGMRRegressor
+
+N_STATES = 5
+N_UPDATES = 20_000
+N_PREDICTS = 2_000
+
+
+def make_data(n_recordings=4, length=500, seed=0):
+    """Random-walk inputs and a torque that is a nonlinear function of them."""
+    rng = np.random.default_rng(seed)
+    X = np.cumsum(rng.normal(scale=0.2, size=(n_recordings * length, 3)), axis=0)
+    y = 2.0 * np.tanh(X[:, 0]) - 0.5 * X[:, 1] + 0.3 * np.sin(X[:, 2])
+    y += rng.normal(scale=0.05, size=len(y))
+    groups = np.repeat(np.arange(n_recordings), length)
+    return X, y, groups
+
+
+def time_calls(function, rows, n_calls):
+    clock = time.perf_counter_ns
+    elapsed = np.empty(n_calls, dtype=np.int64)
+    for i in range(n_calls):
+        row = rows[i % len(rows)]
+        start = clock()
+        function(row)
+        elapsed[i] = clock() - start
+    return elapsed / 1000.0
+
+
+def report(name, microseconds):
+    median, p99 = np.median(microseconds), np.percentile(microseconds, 99)
+    print(f"{name:<34} median {median:8.2f} us   p99 {p99:8.2f} us   ({len(microseconds)} calls)")
+
+
+def main():
+    X, y, groups = make_data()
+    model = HMMGMRRegressor(n_states=N_STATES, random_state=0).fit(X, y, groups=groups)
+    stream = model.filter_stream()
+    rows = X[groups == 0]
+    # Warm up caches and BLAS before timing.
+    time_calls(stream.update, rows, 1000)
+    stream.reset()
+    report("FilterStream.update (1 sample)", time_calls(stream.update, rows, N_UPDATES))
+    one_row = rows[:, np.newaxis, :]
+    report("model.predict (1-row array)", time_calls(model.predict, one_row, N_PREDICTS))
+
+
+if __name__ == "__main__":
+    main()

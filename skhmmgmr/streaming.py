@@ -1,0 +1,361 @@
+"""Sample-by-sample causal GMR filter for real-time use (one update per control cycle).
+
+The stream runs the same normalised forward recursion and Gaussian Mixture Regression as
+:meth:`HMMGMRRegressor.predict <skhmmgmr.HMMGMRRegressor.predict>` (METHOD.md section 2), one
+sample at a time, with the filter state carried between calls. Everything that does not depend
+on the sample is precomputed at construction and every intermediate result lives in a
+preallocated buffer, so that an update is a handful of small NumPy calls on fixed buffers:
+
+- the standardised input ``z`` (with a trailing 1) times ONE stacked matrix gives at once the
+  whitened residuals ``(z - mu_k) U_k`` of every state (``U_k`` the precision Cholesky factor of
+  the input marginal) and every per-state conditional mean;
+- the squared residuals times a block-indicator matrix (with the log-normalisers as its last
+  row) give the log-densities of all states in one more product.
+"""
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+from sklearn.utils.validation import check_is_fitted
+
+from ._gaussian import LOG_2PI, log_det_cholesky
+
+FLAG_OK = "ok"
+FLAG_NON_FINITE = "non-finite"
+FLAG_OUTLIER = "outlier"
+FLAG_RESTARTED = "restarted"
+_HELD_FLAGS = (FLAG_NON_FINITE, FLAG_OUTLIER)
+_MAX_STANDARDISED = 1e100
+
+
+class FilterStream:
+    """Causal HMM-GMR filter of a fitted :class:`~skhmmgmr.HMMGMRRegressor`, one sample a call.
+
+    Streaming a recording sample by sample gives the estimates of ``model.predict`` on the whole
+    recording (up to round-off), as long as no sample is flagged (see Notes). The stream copies
+    the model's parameters when it is created: refitting the model later does not change it.
+
+    Parameters
+    ----------
+    model : HMMGMRRegressor
+        A fitted estimator. Usually created with ``model.filter_stream()``.
+    min_log_density : float, default=log(smallest normal double) ~ -708.4
+        A sample whose input log-density, in the standardised units the model works in, is below
+        this value in every state is an outlier (see Notes). The default flags exactly the
+        samples whose densities all underflow to zero in double precision.
+
+    Attributes
+    ----------
+    last_flag_ : str
+        What happened at the last update: ``"ok"``, ``"restarted"`` (accepted; the transitions
+        allowed no state that explains the sample, so the filter restarted from the input
+        densities, as ``predict`` does), ``"non-finite"`` or ``"outlier"`` (both held).
+    n_samples_ : int
+        Number of samples given since the last :meth:`reset`, held ones included.
+    n_features_in_ : int
+        Number of inputs of one sample.
+    feature_names_in_ : ndarray of str
+        Input names, when the model was fitted on named columns.
+
+    Notes
+    -----
+    Samples the filter cannot use are *held*: the update returns the last accepted estimate (or,
+    before any accepted sample, the prior-mixture estimate ``sum_k pi_k mu_k^T`` and its
+    standard deviation), sets :attr:`held_`, and leaves the filter state unchanged, so the
+    estimates that follow equal those of a stream that never saw the held sample. Two kinds
+    of sample are held:
+
+    - ``"non-finite"``: a NaN or infinite input;
+    - ``"outlier"``: finite inputs so far from every state that all input log-densities are below
+      ``min_log_density`` (or standardised inputs whose absolute values sum above 1e100, where
+      the densities would overflow). ``predict`` would extrapolate the nearest state's linear
+      regression there; the stream does not trust it, keeps the state probabilities, and flags
+      the sample.
+
+    No NaN or infinity ever comes out of :meth:`update`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skhmmgmr import HMMGMRRegressor
+    >>> rng = np.random.default_rng(0)
+    >>> X = np.cumsum(rng.normal(size=(300, 2)), axis=0) / 10
+    >>> y = np.tanh(X[:, 0]) - X[:, 1]
+    >>> model = HMMGMRRegressor(n_states=2, random_state=0).fit(X, y)
+    >>> stream = model.filter_stream()
+    >>> estimates = [stream.update(row) for row in X[:50]]
+    >>> bool(np.allclose(estimates, model.predict(X[:50]), rtol=0, atol=1e-12))
+    True
+    >>> stream.update(np.array([np.nan, 0.0]), return_flag=True)[1]
+    'non-finite'
+    """
+
+    def __init__(self, model, *, min_log_density=math.log(np.finfo(float).tiny)):
+        check_is_fitted(model)
+        params = model._gmr_parameters()
+        n_states, n_outputs, n_inputs = params.coef.shape
+        self.n_features_in_ = n_inputs
+        if hasattr(model, "feature_names_in_"):
+            self.feature_names_in_ = np.asarray(model.feature_names_in_, dtype=object)
+        self.min_log_density = float(min_log_density)
+        self._n_states, self._n_outputs = n_states, n_outputs
+        self._scalar_output = model._y_is_1d
+        self._input_center = np.array(model._center[:n_inputs], dtype=float)
+        self._input_scale = np.array(model._scale[:n_inputs], dtype=float)
+        self._output_center = np.array(model._center[n_inputs:], dtype=float)
+        self._output_scale = np.array(model._scale[n_inputs:], dtype=float)
+        self._center_0, self._scale_0 = float(self._output_center[0]), float(self._output_scale[0])
+        self._startprob = np.array(params.startprob, dtype=float)
+        # A^T @ alpha is a faster BLAS call than alpha @ A for these tiny sizes.
+        self._transmat_t = np.ascontiguousarray(params.transmat.T, dtype=float)
+        self._conditional_variances = np.ascontiguousarray(
+            np.diagonal(params.conditional_covariances, axis1=1, axis2=2)
+        )
+
+        # [z, 1] @ weights = [(z - mu_k) U_k for every k, m_k(z) for every k]
+        n_whitened = n_states * n_inputs
+        weights = np.empty((n_inputs + 1, n_whitened + n_states * n_outputs))
+        chol = params.input_precisions_chol
+        weights[:n_inputs, :n_whitened] = np.hstack(list(chol))
+        weights[n_inputs, :n_whitened] = -np.einsum("kf,kfg->kg", params.input_means, chol).ravel()
+        weights[:n_inputs, n_whitened:] = np.hstack(list(params.coef.transpose(0, 2, 1)))
+        weights[n_inputs, n_whitened:] = params.intercept.ravel()
+        self._weights = weights
+        # [squared residuals, 1] @ block_sum = log-densities: -0.5 * Mahalanobis + normaliser.
+        block_sum = np.zeros((n_whitened + 1, n_states))
+        block_sum[:n_whitened] = -0.5 * np.kron(np.eye(n_states), np.ones((n_inputs, 1)))
+        block_sum[n_whitened] = log_det_cholesky(chol) - 0.5 * n_inputs * LOG_2PI
+        self._block_sum = block_sum
+
+        self._z = np.ones(n_inputs + 1)
+        self._z_inputs = self._z[:n_inputs]
+        self._squares = np.ones(n_whitened + 1)
+        self._squares_head = self._squares[:n_whitened]
+        self._log_prob = np.empty(n_states)
+        self._prior = np.empty(n_states)
+        self._alpha = np.empty(n_states)
+        # Two product buffers: "work" receives the new sample, "accepted" holds the conditional
+        # means of the last accepted sample (needed for the std of a held estimate).
+        self._work = self._product_buffer(weights.shape[1], n_whitened)
+        self._accepted = self._product_buffer(weights.shape[1], n_whitened)
+        self._prior_estimate, self._prior_std = self._prior_mixture(model, n_inputs)
+        self.reset()
+
+    def _product_buffer(self, width, n_whitened):
+        product = np.empty(width)
+        means = product[n_whitened:].reshape(self._n_states, self._n_outputs)
+        return product, product[:n_whitened], means[:, 0] if self._scalar_output else means
+
+    def _prior_mixture(self, model, n_inputs):
+        """Output mean and std under the start probabilities, before any input is seen."""
+        means = model.means_[:, n_inputs:]
+        variances = np.diagonal(model.covars_, axis1=1, axis2=2)[:, n_inputs:]
+        mean = self._startprob @ means
+        std = np.sqrt(np.maximum(self._startprob @ (variances + (means - mean) ** 2), 0.0))
+        if self._scalar_output:
+            return float(mean[0]), float(std[0])
+        return mean, std
+
+    def reset(self):
+        """Restart the filter at the beginning of a new recording.
+
+        Returns
+        -------
+        self : FilterStream
+        """
+        self._prior[:] = self._startprob
+        self._alpha[:] = self._startprob
+        self._started = False
+        self._last_estimate = self._prior_estimate
+        self.last_flag_ = FLAG_OK
+        self.n_samples_ = 0
+        return self
+
+    @property
+    def state_proba_(self):
+        """Filtered state probabilities after the last accepted sample, shape (n_states,).
+
+        Before any accepted sample of a recording they are the start probabilities.
+        """
+        return self._alpha.copy()
+
+    @property
+    def held_(self):
+        """Whether the last update was held (non-finite or outlier sample)."""
+        return self.last_flag_ in _HELD_FLAGS
+
+    def update(self, features, return_std=False, return_flag=False):
+        """Filter one sample and return the estimate of the outputs.
+
+        Parameters
+        ----------
+        features : array-like of shape (n_features,) or mapping
+            One sample. A dict or :class:`pandas.Series` keyed by feature name is accepted
+            when the model was fitted on named columns.
+        return_std : bool, default=False
+            Also return the predictive standard deviation.
+        return_flag : bool, default=False
+            Also return :attr:`last_flag_`.
+
+        Returns
+        -------
+        estimate : float, or ndarray of shape (n_outputs,) for a multi-output model
+        std : float or ndarray, only when ``return_std`` is True
+        flag : str, only when ``return_flag`` is True
+        """
+        if type(features) is np.ndarray and features.shape == self._z_inputs.shape:
+            row = features
+        else:
+            row = self._as_row(features)
+        np.subtract(row, self._input_center, out=self._z_inputs)
+        np.divide(self._z_inputs, self._input_scale, out=self._z_inputs)
+        estimate = self._step()
+        if not (return_std or return_flag):
+            return estimate
+        result = (estimate,)
+        if return_std:
+            result += (self._std(),)
+        if return_flag:
+            result += (self.last_flag_,)
+        return result
+
+    def _step(self):
+        """Advance the filter with the standardised sample in ``self._z``."""
+        self.n_samples_ += 1
+        z_list = self._z_inputs.tolist()
+        # NaN and infinity propagate into the sum; huge inputs would overflow the squares.
+        if not sum(map(abs, z_list)) < _MAX_STANDARDISED:
+            all_finite = all(map(math.isfinite, z_list))
+            return self._hold(FLAG_OUTLIER if all_finite else FLAG_NON_FINITE)
+        product, whitened, means = self._work
+        np.dot(self._z, self._weights, out=product)
+        np.multiply(whitened, whitened, out=self._squares_head)
+        log_prob = self._log_prob
+        np.dot(self._squares, self._block_sum, out=log_prob)
+        log_prob_list = log_prob.tolist()
+        top = max(log_prob_list)
+        if not (top >= self.min_log_density and math.isfinite(sum(log_prob_list))):
+            return self._hold(FLAG_OUTLIER)
+        # Densities relative to the best state, as predict does: the largest is exactly 1.
+        np.subtract(log_prob, top, out=log_prob)
+        np.exp(log_prob, out=log_prob)
+        alpha = self._alpha
+        np.multiply(self._prior, log_prob, out=alpha)
+        total = sum(alpha.tolist())
+        if total > 0.0:
+            self.last_flag_ = FLAG_OK
+        else:
+            alpha[:] = log_prob
+            total = sum(log_prob.tolist())
+            self.last_flag_ = FLAG_RESTARTED
+        np.multiply(alpha, 1.0 / total, out=alpha)
+        np.dot(self._transmat_t, alpha, out=self._prior)
+        self._work, self._accepted = self._accepted, self._work
+        self._started = True
+        if self._scalar_output:
+            estimate = float(np.dot(alpha, means)) * self._scale_0 + self._center_0
+            self._last_estimate = estimate
+        else:
+            estimate = np.dot(alpha, means) * self._output_scale + self._output_center
+            self._last_estimate = estimate.copy()
+        return estimate
+
+    def _hold(self, flag):
+        self.last_flag_ = flag
+        estimate = self._last_estimate
+        return estimate if self._scalar_output else estimate.copy()
+
+    def _std(self):
+        """Predictive std at the last accepted sample (law of total variance)."""
+        if not self._started:
+            std = self._prior_std
+            return std if self._scalar_output else std.copy()
+        means = self._accepted[2]
+        if self._scalar_output:
+            means = means[:, np.newaxis]
+        alpha = self._alpha
+        estimate = alpha @ means
+        spread = means - estimate
+        variance = alpha @ self._conditional_variances + alpha @ (spread * spread)
+        std = np.sqrt(variance) * self._output_scale
+        return float(std[0]) if self._scalar_output else std
+
+    def update_batch(self, X, return_std=False, return_flag=False):
+        """Filter several consecutive samples, carrying the filter state on.
+
+        Equivalent to calling :meth:`update` on every row in turn.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_features)
+            Consecutive samples; a DataFrame's columns are selected by feature name when the
+            model was fitted on named columns.
+        return_std : bool, default=False
+            Also return the predictive standard deviations.
+        return_flag : bool, default=False
+            Also return the flag of every sample.
+
+        Returns
+        -------
+        estimates : ndarray of shape (n_samples,) or (n_samples, n_outputs)
+        std : ndarray of the same shape, only when ``return_std`` is True
+        flags : ndarray of str of shape (n_samples,), only when ``return_flag`` is True
+        """
+        X = self._as_batch(X)
+        shape = (X.shape[0],) if self._scalar_output else (X.shape[0], self._n_outputs)
+        estimates = np.empty(shape)
+        std = np.empty(shape) if return_std else None
+        flags = np.empty(X.shape[0], dtype=object) if return_flag else None
+        z_inputs = self._z_inputs
+        for i, row in enumerate(X):
+            np.subtract(row, self._input_center, out=z_inputs)
+            np.divide(z_inputs, self._input_scale, out=z_inputs)
+            estimates[i] = self._step()
+            if return_std:
+                std[i] = self._std()
+            if return_flag:
+                flags[i] = self.last_flag_
+        result = (estimates,) + tuple(a for a in (std, flags) if a is not None)
+        return result if len(result) > 1 else estimates
+
+    def _as_row(self, features):
+        names = getattr(self, "feature_names_in_", None)
+        if isinstance(features, Mapping) or _is_series(features):
+            if names is None:
+                raise ValueError(
+                    "features given by name, but the model was fitted without feature names; "
+                    "give a 1-D array in the order of the training columns"
+                )
+            missing = [name for name in names if name not in features]
+            if missing:
+                raise ValueError(f"features lacks the input(s) {missing} the model was fitted on")
+            return np.array([features[name] for name in names], dtype=float)
+        row = np.asarray(features, dtype=float)
+        if row.shape != self._z_inputs.shape:
+            raise ValueError(
+                f"update takes one sample of shape ({self.n_features_in_},), got shape "
+                f"{row.shape}; use update_batch for several samples"
+            )
+        return row
+
+    def _as_batch(self, X):
+        names = getattr(self, "feature_names_in_", None)
+        if hasattr(X, "columns"):
+            if names is not None:
+                missing = [name for name in names if name not in X.columns]
+                if missing:
+                    raise ValueError(f"X lacks the column(s) {missing} the model was fitted on")
+                X = X[list(names)]
+            X = X.to_numpy(dtype=float)
+        X = np.asarray(X, dtype=float)
+        if X.ndim != 2 or X.shape[1] != self.n_features_in_:
+            raise ValueError(
+                f"update_batch takes an array of shape (n_samples, {self.n_features_in_}), got "
+                f"shape {X.shape}"
+            )
+        return X
+
+
+def _is_series(features):
+    return hasattr(features, "index") and hasattr(features, "to_numpy") and features.ndim == 1

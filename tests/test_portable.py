@@ -1,0 +1,205 @@
+"""Portable model file: round trip, the plain-NumPy reference filter, malformed files."""
+
+import copy
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import skhmmgmr
+from skhmmgmr import HMMGMRRegressor
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "plot_portable_filter.py"
+
+
+def load_reference_filter():
+    """``portable_filter`` from the gallery example (its demonstration is not run)."""
+    spec = importlib.util.spec_from_file_location("plot_portable_filter", EXAMPLE)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.portable_filter
+
+
+def make_data(n_outputs=1, seed=0):
+    rng = np.random.default_rng(seed)
+    X = np.cumsum(rng.normal(scale=0.25, size=(450, 3)), axis=0) + [30.0, 0.0, -5.0]
+    torque = 2.0 * np.tanh(X[:, 1]) - 0.5 * X[:, 2] + 0.1 * np.sin(X[:, 0])
+    y = torque + rng.normal(scale=0.05, size=450)
+    if n_outputs == 2:
+        y = np.column_stack([y, torque**2])
+    frame = pd.DataFrame(X, columns=["speed", "steering_wheel_angle", "yaw_rate"])
+    return frame, y, np.repeat(["a", "b", "c"], 150)
+
+
+@pytest.fixture(scope="module")
+def data():
+    return make_data()
+
+
+@pytest.fixture(scope="module")
+def model(data):
+    X, y, groups = data
+    return HMMGMRRegressor(n_states=5, random_state=0).fit(X, y, groups=groups)
+
+
+@pytest.fixture
+def exported(model, tmp_path):
+    path = tmp_path / "model.json"
+    model.export_json(path, output_names=["steering_torque"])
+    return path
+
+
+def test_round_trip_predicts_identically(data, model, exported):
+    X, _, groups = data
+    restored = HMMGMRRegressor.from_json(exported)
+    expected, expected_std = model.predict(X, groups=groups, return_std=True)
+    got, got_std = restored.predict(X, groups=groups, return_std=True)
+    np.testing.assert_array_equal(got, expected)
+    np.testing.assert_array_equal(got_std, expected_std)
+    assert restored.get_params() == model.get_params()
+    np.testing.assert_array_equal(restored.feature_names_in_, model.feature_names_in_)
+    for name in ["startprob_", "transmat_", "means_", "covars_", "log_likelihood_history_"]:
+        np.testing.assert_array_equal(getattr(restored, name), getattr(model, name))
+    assert restored.log_likelihood_ == model.log_likelihood_
+    assert restored.n_iter_ == model.n_iter_ and restored.converged_ == model.converged_
+    assert HMMGMRRegressor.from_dict(model.to_dict()).to_dict() == model.to_dict()
+
+
+def test_file_is_strict_json_with_documented_keys(model, exported):
+    def reject(token):
+        raise AssertionError(f"non-finite token {token}")
+
+    data = json.loads(exported.read_text(), parse_constant=reject)
+    assert data["format"] == "skhmmgmr-hmm-gmr" and data["format_version"] == 1
+    assert data["package_version"] == skhmmgmr.__version__
+    assert data["feature_names"] == ["speed", "steering_wheel_angle", "yaw_rate"]
+    assert data["output_names"] == ["steering_torque"]
+    assert (data["n_states"], data["n_inputs"], data["n_outputs"]) == (5, 3, 1)
+    chol = np.array(data["filter"]["input_precision_cholesky"])
+    np.testing.assert_array_equal(chol, np.triu(chol))
+    assert model.to_dict()["output_names"] == ["output_0"]
+
+
+@pytest.mark.parametrize("n_outputs", [1, 2])
+def test_reference_filter_matches_predict(tmp_path, n_outputs):
+    X, y, groups = make_data(n_outputs=n_outputs, seed=n_outputs)
+    model = HMMGMRRegressor(n_states=4, random_state=0).fit(X, y, groups=groups)
+    path = tmp_path / "model.json"
+    model.export_json(path)
+    portable_filter = load_reference_filter()
+    for recording in ["a", "c"]:
+        rows = X[groups == recording]
+        expected, expected_std = model.predict(rows, return_std=True)
+        got, got_std = portable_filter(path, rows.to_numpy())
+        np.testing.assert_allclose(got.reshape(expected.shape), expected, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(got_std.reshape(expected.shape), expected_std, atol=1e-12)
+
+
+def test_unnamed_multi_output_round_trip(tmp_path):
+    X, y, groups = make_data(n_outputs=2)
+    model = HMMGMRRegressor(n_states=2, random_state=0).fit(X.to_numpy(), y, groups=groups)
+    restored = HMMGMRRegressor.from_dict(json.loads(json.dumps(model.to_dict())))
+    assert not hasattr(restored, "feature_names_in_")
+    assert restored.to_dict()["feature_names"] == ["x0", "x1", "x2"]
+    np.testing.assert_array_equal(restored.predict(X.to_numpy()), model.predict(X.to_numpy()))
+    assert restored.predict(X.to_numpy()).shape == (450, 2)
+
+
+def test_output_names_must_match_outputs(model):
+    with pytest.raises(ValueError, match="2 names for 1 output"):
+        model.to_dict(output_names=["a", "b"])
+
+
+def test_unfitted_model_cannot_export():
+    from sklearn.exceptions import NotFittedError
+
+    with pytest.raises(NotFittedError):
+        HMMGMRRegressor().to_dict()
+
+
+def edited(data, key, value):
+    """Copy of ``data`` with the dotted ``key`` set to ``value`` (deleted when ``...``)."""
+    data = copy.deepcopy(data)
+    *parents, last = key.split(".")
+    target = data
+    for parent in parents:
+        target = target[parent]
+    if value is ...:
+        del target[last]
+    else:
+        target[last] = value
+    return data
+
+
+@pytest.mark.parametrize(
+    "key",
+    [
+        "format_version",
+        "n_states",
+        "feature_names",
+        "standardization.output_scale",
+        "filter.input_means",
+        "filter.transition_matrix",
+        "joint.covariances",
+        "estimator_params",
+    ],
+)
+def test_missing_key_is_named(model, key):
+    with pytest.raises(ValueError, match=f"lacks the key '{key}'"):
+        HMMGMRRegressor.from_dict(edited(model.to_dict(), key, ...))
+
+
+@pytest.mark.parametrize(
+    "key, value, message",
+    [
+        ("filter.input_means", [[0.0, 1.0]] * 5, r"'filter.input_means' has shape \(5, 2\)"),
+        ("filter.transition_matrix", [[1.0]], "'filter.transition_matrix' has shape"),
+        ("joint.means", [[float("nan")] * 4] * 5, "'joint.means' holds non-finite"),
+        ("filter.regression_intercepts", [["a"]] * 5, "'filter.regression_intercepts' is not"),
+        ("filter.start_probabilities", [0.5, 0.6, 0, 0, -0.1], "start_probabilities' must"),
+        ("standardization.input_scale", [1.0, 0.0, 1.0], "input_scale' must be positive"),
+        ("format_version", 2, "'format_version' is 2"),
+        ("format", "onnx", "'format' is 'onnx'"),
+        ("n_inputs", 0, "'n_inputs' must be a positive integer"),
+        ("feature_names", ["a", "b"], "'feature_names' must be a list of 3"),
+        ("target_ndim", 3, "'target_ndim' is 3"),
+        ("estimator_params", {"n_stats": 2}, "'estimator_params' holds an unknown"),
+    ],
+)
+def test_malformed_content_is_named(model, key, value, message):
+    with pytest.raises(ValueError, match=message):
+        HMMGMRRegressor.from_dict(edited(model.to_dict(), key, value))
+
+
+def test_edited_filter_parameters_are_refused(model):
+    data = model.to_dict()
+    data["filter"]["regression_coefficients"][2][0][1] += 0.01
+    with pytest.raises(ValueError, match="'filter.regression_coefficients' does not match"):
+        HMMGMRRegressor.from_dict(data)
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("[1, 2, 3]", "must be a JSON object, got list"),
+        ('{"format": ', "is not a valid JSON file"),
+        ('{"format": NaN}', "NaN is not valid JSON"),
+        ('{"format": "skhmmgmr-hmm-gmr", "format_version": 1}', "lacks the key 'n_states'"),
+    ],
+)
+def test_bad_files(tmp_path, text, message):
+    path = tmp_path / "bad.json"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message):
+        HMMGMRRegressor.from_json(path)
+
+
+def test_restored_model_streams(data, exported):
+    X, _, groups = data
+    restored = HMMGMRRegressor.from_json(exported)
+    rows = X[groups == "b"]
+    got = restored.filter_stream().update_batch(rows)
+    np.testing.assert_allclose(got, restored.predict(rows), rtol=0, atol=1e-12)
