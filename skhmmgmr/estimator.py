@@ -93,8 +93,8 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
     >>> model = HMMGMRRegressor(n_states=2, random_state=0).fit(X, y, groups=groups)
     >>> model.predict(X, groups=groups).shape
     (400,)
-    >>> round(model.score(X, y, groups=groups), 2)
-    0.99
+    >>> model.score(X, y, groups=groups) > 0.95
+    True
     """
 
     _parameter_constraints = {
