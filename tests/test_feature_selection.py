@@ -1,0 +1,300 @@
+"""Spearman filter and the exhaustive / forward wrappers, on recordings."""
+
+import functools
+
+import numpy as np
+import pandas as pd
+import pytest
+import sklearn
+from scipy import stats
+from sklearn.base import clone
+from sklearn.feature_selection import SelectKBest, SequentialFeatureSelector
+from sklearn.model_selection import GroupKFold, PredefinedSplit
+from sklearn.pipeline import make_pipeline
+from threadpoolctl import threadpool_limits
+
+from skhmmgmr import HMMGMRRegressor
+from skhmmgmr._search import ForwardPath
+from skhmmgmr.feature_selection import (
+    ExhaustiveFeatureSelector,
+    ForwardFeatureSelector,
+    SpearmanSelector,
+    spearman_relevance,
+)
+from skhmmgmr.metrics import PerformanceScore, performance_score
+
+PERIOD = 0.05
+FEATURES = ["f0", "f1", "f2", "f3"]
+
+
+def make_recordings(n_train=4, n_validation=3, length=150, n_features=4, seed=0):
+    """Torque = nonlinear map of f0 and f1 + noise; the other features are irrelevant."""
+    rng = np.random.default_rng(seed)
+    frames = []
+    for split, n in (("train", n_train), ("validation", n_validation)):
+        for r in range(n):
+            x = np.cumsum(rng.normal(scale=0.15, size=(length, n_features)), axis=0)
+            x -= x.mean(axis=0)
+            torque = 1.5 * np.tanh(2 * x[:, 0]) + 0.8 * x[:, 1]
+            frame = pd.DataFrame(x, columns=[f"f{i}" for i in range(n_features)])
+            frame.insert(0, "recording", f"{split}{r}")
+            frame.insert(1, "split", split)
+            frame["driver_torque"] = torque + rng.normal(scale=0.05, size=length)
+            frames.append(frame)
+    data = pd.concat(frames, ignore_index=True)
+    X = data[[c for c in data.columns if c.startswith("f")]]
+    cv = PredefinedSplit(np.where(data["split"] == "validation", 0, -1))
+    return X, data["driver_torque"].to_numpy(), data["recording"].to_numpy(), cv
+
+
+@pytest.fixture(scope="module")
+def data():
+    return make_recordings()
+
+
+@pytest.fixture(scope="module")
+def exhaustive(data):
+    X, y, groups, cv = data
+    return ExhaustiveFeatureSelector(cv=cv, sampling_period=PERIOD).fit(X, y, groups=groups)
+
+
+# -- filter ----------------------------------------------------------------------------------
+
+
+def test_spearman_is_averaged_over_recordings(data):
+    X, y, groups, _ = data
+    scores, pvalues = spearman_relevance(X, y, groups=groups)
+    rhos, ps = [], []
+    for rec in pd.unique(groups):
+        rows = groups == rec
+        results = [stats.spearmanr(X.to_numpy()[rows, j], y[rows]) for j in range(X.shape[1])]
+        rhos.append([abs(r.statistic) for r in results])
+        ps.append([r.pvalue for r in results])
+    np.testing.assert_allclose(scores, np.mean(rhos, axis=0))
+    fisher = [
+        stats.combine_pvalues(np.clip(column, 1e-300, 1), method="fisher").pvalue
+        for column in np.asarray(ps).T
+    ]
+    np.testing.assert_allclose(pvalues, fisher)
+    # pooled rows differ from the per-recording average
+    pooled, _ = spearman_relevance(X, y)
+    assert not np.allclose(pooled, scores)
+    assert list(np.argsort(-scores)[:2]) == [0, 1]
+
+
+def test_spearman_constant_feature_in_a_recording():
+    X = np.column_stack([np.r_[np.ones(5), np.arange(5.0)], np.arange(10.0)])
+    y = np.arange(10.0)
+    scores, pvalues = spearman_relevance(X, y, groups=np.repeat([0, 1], 5))
+    np.testing.assert_allclose(scores, [1.0, 1.0])  # the constant recording is left out
+    assert np.all((pvalues >= 0) & (pvalues <= 1))
+
+
+def test_spearman_in_select_k_best_and_selector(data):
+    X, y, groups, _ = data
+    grouped = SelectKBest(functools.partial(spearman_relevance, groups=groups), k=2).fit(X, y)
+    np.testing.assert_allclose(grouped.scores_, spearman_relevance(X, y, groups=groups)[0])
+    pooled = SelectKBest(spearman_relevance, k=2).fit(X, y)  # rows as one recording
+    np.testing.assert_allclose(pooled.scores_, spearman_relevance(X, y)[0])
+
+    pipe = make_pipeline(SpearmanSelector(k=2), HMMGMRRegressor(n_states=2, random_state=0))
+    with sklearn.config_context(enable_metadata_routing=True):
+        pipe.fit(X, y, groups=groups)
+        assert pipe.predict(X, groups=groups).shape == y.shape
+    selector = pipe[0]
+    np.testing.assert_allclose(selector.scores_, spearman_relevance(X, y, groups=groups)[0])
+    assert list(selector.get_feature_names_out()) == ["f0", "f1"]
+    assert selector.pvalues_.shape == (X.shape[1],)
+
+
+# -- exhaustive wrapper ----------------------------------------------------------------------
+
+
+def test_exhaustive_evaluates_every_subset_on_every_recording(data, exhaustive):
+    X = data[0]
+    results = exhaustive.results_
+    n = X.shape[1]
+    assert results["subset"].nunique() == 2**n - 1
+    assert len(results) == (2**n - 1) * 3  # three validation recordings
+    assert set(results.columns) >= {"subset", "n_features", "recording", "rmse", "accuracy"}
+    assert results.groupby("subset")["recording"].nunique().eq(3).all()
+
+
+def test_exhaustive_rescore_equals_direct_performance_score(data, exhaustive):
+    X, y, groups, cv = data
+    train, val = next(cv.split(X, y))
+    table = exhaustive.results_
+    scores = exhaustive.rescore("70/30")
+    for subset in [("f0",), ("f0", "f1"), ("f1", "f2", "f3")]:
+        model = HMMGMRRegressor(n_states=2, random_state=0)
+        model.fit(X.iloc[train][list(subset)], y[train], groups=groups[train])
+        prediction = model.predict(X.iloc[val][list(subset)], groups=groups[val])
+        totals = table.assign(loss=(100 - table["accuracy"]).abs()).groupby("recording")
+        expected = performance_score(
+            y[val],
+            prediction,
+            accuracy_weight=0.7,
+            smoothness_weight=0.3,
+            sampling_period=PERIOD,
+            groups=groups[val],
+            accuracy_scale=totals["loss"].sum(),
+            smoothness_scale=totals["smoothness"].sum(),
+        )
+        got = scores.loc[scores["subset"] == subset, "performance_score"].mean()
+        assert got == pytest.approx(expected, rel=1e-10)
+
+
+def test_exhaustive_finds_the_relevant_features(exhaustive):
+    best = exhaustive.best_subsets("100/0", per_recording=False)
+    assert best["subset"].iloc[0] == ("f0", "f1")
+    per_recording = exhaustive.best_subsets(["100/0", "0/100"])
+    assert len(per_recording) == 2 * 3
+    accurate = per_recording[per_recording["trade_off"] == "100/0"]
+    assert all("f0" in subset for subset in accurate["subset"])
+
+
+def test_exhaustive_in_a_pipeline(data):
+    X, y, groups, cv = data
+    selector = ExhaustiveFeatureSelector(
+        max_features=2, cv=cv, accuracy_weight=1.0, smoothness_weight=0.0, sampling_period=PERIOD
+    )
+    pipe = make_pipeline(selector, HMMGMRRegressor(n_states=2, random_state=0))
+    with sklearn.config_context(enable_metadata_routing=True):
+        pipe.fit(X, y, groups=groups)
+        assert pipe.predict(X, groups=groups).shape == y.shape
+    assert pipe[0].results_["n_features"].max() == 2
+    assert len(pipe[0].results_["subset"].unique()) == 4 + 6
+    assert list(pipe[0].get_feature_names_out()) == ["f0", "f1"]
+    assert pipe[-1].n_features_in_ == 2
+
+
+def test_integer_cv_needs_groups(data):
+    X, y, _, _ = data
+    with pytest.raises(ValueError, match="needs groups"):
+        ExhaustiveFeatureSelector(cv=3, sampling_period=PERIOD).fit(X, y)
+    with pytest.raises(ValueError, match="sampling_period"):
+        ExhaustiveFeatureSelector(cv=3).fit(X, y)
+
+
+# -- caching and parallelism -----------------------------------------------------------------
+
+FITS = []
+
+
+class CountingRegressor(HMMGMRRegressor):
+    def fit(self, X, y, groups=None, time=None):
+        FITS.append(X.shape[1])
+        return super().fit(X, y, groups=groups, time=time)
+
+
+def test_memory_cache_returns_identical_results_without_refitting(data, tmp_path):
+    X, y, groups, cv = data
+    estimator = CountingRegressor(n_states=2, random_state=0)
+    params = dict(max_features=2, cv=cv, sampling_period=PERIOD, memory=str(tmp_path))
+    FITS.clear()
+    first = ExhaustiveFeatureSelector(estimator, **params).fit(X, y, groups=groups)
+    assert len(FITS) == 4 + 6
+    FITS.clear()
+    second = ExhaustiveFeatureSelector(estimator, **params).fit(X, y, groups=groups)
+    assert FITS == []
+    pd.testing.assert_frame_equal(first.results_, second.results_)
+    # a larger search resumes: only the new subsets are fitted
+    ExhaustiveFeatureSelector(estimator, **{**params, "max_features": 3}).fit(X, y, groups=groups)
+    assert len(FITS) == 4
+
+
+def test_n_jobs_gives_identical_results(data, exhaustive):
+    X, y, groups, cv = data
+    parallel = ExhaustiveFeatureSelector(cv=cv, max_features=2, sampling_period=PERIOD, n_jobs=2)
+    parallel.fit(X, y, groups=groups)
+    expected = exhaustive.results_[exhaustive.results_["n_features"] <= 2].reset_index(drop=True)
+    pd.testing.assert_frame_equal(parallel.results_, expected, check_exact=True)
+
+
+# -- forward wrapper -------------------------------------------------------------------------
+
+
+def test_forward_path_stops_by_the_one_percent_rule():
+    scores = {
+        (0,): 1.0,
+        (1,): 0.8,
+        (2,): 0.9,
+        (0, 1): 0.5,
+        (1, 2): 0.6,
+        (0, 1, 2): 0.496,  # 0.8% better than 0.5: not enough
+    }
+    path = ForwardPath(3, tol=0.01, max_features=3)
+    while path.active:
+        path.step(scores.__getitem__)
+    assert path.selected == (1, 0)
+    assert [h["accepted"] for h in path.history] == [True, True, False]
+    assert path.history[-1]["gain"] == pytest.approx(0.008)
+
+    scores[(0, 1, 2)] = 0.49  # 2% better: accepted, then no feature is left
+    path = ForwardPath(3, tol=0.01, max_features=3)
+    while path.active:
+        path.step(scores.__getitem__)
+    assert path.selected == (1, 0, 2)
+    # max_features ends a path even when the gain is large
+    path = ForwardPath(3, tol=0.01, max_features=1)
+    while path.active:
+        path.step(scores.__getitem__)
+    assert path.selected == (1,)
+
+
+def test_forward_selector_average_and_per_recording(data):
+    X, y, groups, cv = data
+    params = dict(cv=cv, accuracy_weight=1.0, smoothness_weight=0.0, sampling_period=PERIOD)
+    average = ForwardFeatureSelector(**params).fit(X, y, groups=groups)
+    assert set(average.subset_) >= {"f0", "f1"}
+    assert list(average.paths_["path"].unique()) == ["average"]
+    steps = average.paths_
+    assert steps["accepted"].iloc[:-1].all()
+    last = steps.iloc[-1]
+    assert (not last["accepted"] and last["gain"] <= 0.01) or len(average.subset_) == 4
+
+    per_recording = ForwardFeatureSelector(
+        mode="per_recording", trade_offs=["0/100"], **params
+    ).fit(X, y, groups=groups)
+    paths = per_recording.paths_
+    assert set(paths["trade_off"]) == {"100/0", "0/100"}
+    assert paths.groupby("trade_off")["path"].nunique().eq(3).all()
+    best = per_recording.best_subsets(["100/0", "0/100"])
+    assert len(best) == 6
+    assert all("f0" in subset for subset in best.loc[best["trade_off"] == "100/0", "subset"])
+    # every distinct subset was fitted once and is kept in results_
+    assert not per_recording.results_.duplicated(["subset", "recording"]).any()
+    with pytest.raises(ValueError, match="no forward path"):
+        per_recording.best_subsets("50/50")
+
+
+def test_sklearn_sequential_feature_selector_with_routed_groups(data):
+    X, y, groups, _ = data
+    scorer = PerformanceScore(1.0, 0.0, sampling_period=PERIOD)
+    sfs = SequentialFeatureSelector(
+        HMMGMRRegressor(n_states=2, random_state=0),
+        n_features_to_select=2,
+        scoring=scorer,
+        cv=GroupKFold(n_splits=3),
+    )
+    # k-means' OpenMP threads only spin on such small fits
+    with sklearn.config_context(enable_metadata_routing=True), threadpool_limits(1):
+        sfs.fit(X, y, groups=groups)
+    assert list(sfs.get_feature_names_out()) == ["f0", "f1"]
+    # the selection equals a hand-made forward step whose folds are scored per recording
+    with sklearn.config_context(enable_metadata_routing=True), threadpool_limits(1):
+        first = {
+            j: np.mean(
+                [
+                    scorer(
+                        clone(sfs.estimator).fit(X.iloc[tr, [j]], y[tr], groups=groups[tr]),
+                        X.iloc[te, [j]],
+                        y[te],
+                        groups=groups[te],
+                    )
+                    for tr, te in GroupKFold(n_splits=3).split(X, y, groups)
+                ]
+            )
+            for j in range(X.shape[1])
+        }
+    assert max(first, key=first.get) == 0

@@ -1,0 +1,175 @@
+"""Feature relevance, candidate subsets and the one-call framework select_parameters."""
+
+import joblib
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+from sklearn.model_selection import PredefinedSplit
+
+from skhmmgmr.feature_selection import ExhaustiveFeatureSelector
+from skhmmgmr.selection import (
+    SelectionReport,
+    candidate_subsets,
+    feature_relevance,
+    one_way_anova,
+    select_parameters,
+)
+
+PERIOD = 0.05
+
+
+def make_protocol(n_recordings=(4, 3, 2), length=150, n_features=4, seed=0):
+    """Tidy table like skhmmgmr.datasets: the torque depends on f0 and f1 only."""
+    rng = np.random.default_rng(seed)
+    frames = []
+    for split, n in zip(("train", "validation", "test"), n_recordings, strict=True):
+        for r in range(n):
+            x = np.cumsum(rng.normal(scale=0.15, size=(length, n_features)), axis=0)
+            x -= x.mean(axis=0)
+            frame = pd.DataFrame(x, columns=[f"f{i}" for i in range(n_features)])
+            frame.insert(0, "recording", f"{split}{r}")
+            frame.insert(1, "split", split)
+            frame.insert(2, "time", np.arange(length) * PERIOD)
+            torque = 1.5 * np.tanh(2 * x[:, 0]) + 0.8 * x[:, 1]
+            frame["driver_torque"] = torque + rng.normal(scale=0.05, size=length)
+            frames.append(frame)
+    return pd.concat(frames, ignore_index=True)
+
+
+@pytest.fixture(scope="module")
+def protocol():
+    return make_protocol()
+
+
+@pytest.fixture(scope="module")
+def report(protocol):
+    return select_parameters(protocol, k_max=3, progress=False)
+
+
+def test_feature_relevance_counts(protocol):
+    search = protocol[protocol["split"] != "test"]
+    cv = PredefinedSplit(np.where(search["split"] == "validation", 0, -1))
+    selector = ExhaustiveFeatureSelector(cv=cv, sampling_period=PERIOD)
+    selector.fit(search[["f0", "f1", "f2", "f3"]], search["driver_torque"], search["recording"])
+    relevance = feature_relevance(selector)
+    assert list(relevance.columns) == [f"{a}/{100 - a}" for a in range(100, -1, -10)]
+    assert list(relevance.index) == ["f0", "f1", "f2", "f3"]
+    assert relevance.attrs["n_recordings"] == 3
+    best = selector.best_subsets(list(relevance.columns))
+    for label, column in relevance.items():
+        # every best subset contributes each of its features once
+        subsets = best.loc[best["trade_off"] == label, "subset"]
+        assert column.sum() == subsets.map(len).sum()
+        assert column.max() <= 3
+    # the same counts from the results table and from a table of best subsets
+    pd.testing.assert_frame_equal(
+        feature_relevance(selector.results_, features=list(relevance.index)), relevance
+    )
+    pd.testing.assert_frame_equal(
+        feature_relevance(best, features=list(relevance.index)), relevance
+    )
+    # accuracy-only relevance counts the features the torque depends on
+    assert relevance.loc["f0", "100/0"] == 3
+
+
+def test_candidate_subsets_are_nested():
+    labels = ["50/50"]
+    one = pd.DataFrame({"50/50": [10, 5, 3, 1, 0]}, index=list("abcde"))
+    two = pd.DataFrame({"50/50": [0, 9, 1, 0, 2]}, index=list("abcde"))
+    one.attrs["n_recordings"] = two.attrs["n_recordings"] = 10
+    candidates = candidate_subsets(one, two, labels[0])
+    assert list(candidates["name"]) == [
+        f"{s} {n}" for n in (1, 2, 3) for s in ("Strict", "Mild", "Liberal")
+    ]
+    by_name = dict(zip(candidates["name"], candidates["features"], strict=True))
+    assert by_name["Strict 1"] == ("a",)
+    assert by_name["Mild 1"] == ("a", "b")
+    assert by_name["Liberal 1"] == ("a", "b", "c", "d")
+    assert by_name["Strict 2"] == ("b",)
+    # combined: counts 10, 14, 4, 1, 2 of 20 recordings
+    assert by_name["Strict 3"] == ("b",)
+    assert by_name["Mild 3"] == ("a", "b")
+    assert by_name["Liberal 3"] == tuple("abcde")
+    for n in (1, 2, 3):
+        strict, mild, liberal = (set(by_name[f"{s} {n}"]) for s in ("Strict", "Mild", "Liberal"))
+        assert strict <= mild <= liberal
+
+
+def test_one_way_anova_matches_scipy():
+    table = pd.DataFrame(
+        {"trade_off": ["a"] * 3 + ["b"] * 3, "accuracy": [90.0, 91, 92, 80, 85, 83]}
+    )
+    result = one_way_anova(table, by="trade_off", values="accuracy")
+    expected = stats.f_oneway([90.0, 91, 92], [80.0, 85, 83])
+    assert result["F"].iloc[0] == pytest.approx(expected.statistic)
+    assert result["pvalue"].iloc[0] == pytest.approx(expected.pvalue)
+
+
+def test_select_parameters_report(report):
+    assert isinstance(report, SelectionReport)
+    assert "f0" in report.features
+    assert set(report.features) <= {"f0", "f1", "f2", "f3"}
+    assert 1 <= report.n_states <= 3
+    assert report.filter["feature"].iloc[0] == "f0"
+    assert report.exhaustive["subset"].nunique() == 2**4 - 1
+    assert set(report.relevance.index.get_level_values("source")) == {
+        "exhaustive",
+        "forward",
+        "combined",
+    }
+    combined = report.relevance.loc["combined"]
+    pd.testing.assert_frame_equal(
+        combined, report.relevance.loc["exhaustive"] + report.relevance.loc["forward"]
+    )
+    assert len(report.candidates) == 9 + 1  # nine strategies and the baseline
+    candidates = report.candidates[report.candidates["name"] != "Baseline"]
+    chosen = candidates.dropna(subset=["rank"]).sort_values("rank").iloc[0]
+    assert report.candidates["rank"].iloc[-1] >= 1  # the baseline is ranked too
+    assert tuple(chosen["features"]) == report.features
+    assert list(report.state_choices["n_states"][report.state_choices["trade_off"] == "50/50"]) == [
+        report.n_states
+    ]
+    assert list(report.bic["n_states"]) == [1, 2, 3]
+    assert set(report.test_summary["model"]) == {"final", "baseline"}
+    assert set(report.test["recording"]) == {"test0", "test1"}
+    assert report.final_model.n_features_in_ == len(report.features)
+    assert report.baseline_model.n_features_in_ == 4
+    assert report.final_model.n_states == report.baseline_model.n_states == report.n_states
+    assert set(report.anova["analysis"].str.split(" ").str[0]) == {"feature", "candidate", "state"}
+    assert "feature subset" in report.summary()
+
+
+def test_select_parameters_from_arrays_and_cache(protocol, tmp_path, report):
+    X = protocol[["f0", "f1", "f2", "f3"]]
+    arrays = (X, protocol["driver_torque"].to_numpy(), protocol["recording"].to_numpy())
+    split = dict(zip(protocol["recording"], protocol["split"], strict=False))
+    params = dict(split=split, k_max=3, sampling_period=PERIOD, progress=False)
+    cached = select_parameters(arrays, memory=str(tmp_path), **params)
+    assert cached.features == report.features
+    pd.testing.assert_frame_equal(cached.exhaustive, report.exhaustive)
+    again = select_parameters(arrays, memory=joblib.Memory(tmp_path, verbose=0), **params)
+    pd.testing.assert_frame_equal(again.forward_paths, cached.forward_paths)
+    pd.testing.assert_frame_equal(again.states, cached.states)
+    with pytest.raises(ValueError, match="split"):
+        select_parameters(arrays, k_max=2, sampling_period=PERIOD, progress=False)
+
+
+def test_exhaustive_search_on_a_dask_cluster(protocol):
+    distributed = pytest.importorskip(
+        "distributed", reason="dask.distributed is not installed (pip install 'dask[distributed]')"
+    )
+    search = protocol[protocol["split"] != "test"]
+    X, y, groups = search[["f0", "f1", "f2"]], search["driver_torque"], search["recording"]
+    cv = PredefinedSplit(np.where(search["split"] == "validation", 0, -1))
+    local = ExhaustiveFeatureSelector(cv=cv, sampling_period=PERIOD).fit(X, y, groups=groups)
+    with (
+        distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None
+        ) as cluster,
+        distributed.Client(cluster),
+        joblib.parallel_backend("dask"),
+    ):
+        remote = ExhaustiveFeatureSelector(cv=cv, sampling_period=PERIOD, n_jobs=-1)
+        remote.fit(X, y, groups=groups)
+    pd.testing.assert_frame_equal(remote.results_, local.results_)
