@@ -2,7 +2,9 @@
 
 from ._base import clear_data_home, get_data_home
 from ._comma2k19 import load_comma2k19_segment
+from ._driver import DRIVER_STYLES, DriverParameters
 from ._fetch import COMMA2K19_URL, fetch_comma2k19
+from ._protocol import make_driving_protocol
 from ._recordings import load_recordings
 from ._schema import (
     DRIVER,
@@ -14,8 +16,16 @@ from ._schema import (
     TARGET,
     TIME,
 )
+from ._simulator import CALIBRATION_BANDS, THESIS_TABLE_C2, calibration_table, make_lane_keeping
 
 __all__ = [
+    "CALIBRATION_BANDS",
+    "DRIVER_STYLES",
+    "DriverParameters",
+    "THESIS_TABLE_C2",
+    "calibration_table",
+    "make_driving_protocol",
+    "make_lane_keeping",
     "COMMA2K19_URL",
     "clear_data_home",
     "fetch_comma2k19",

@@ -1,0 +1,173 @@
+"""Virtual drivers that steer with torque (thesis Appendix C.1, Table C.1).
+
+The driver model has two layers.
+
+Visual layer (path following), perceived with a reaction delay: a two-point preview controller
+asks for a path curvature from the far point (pure pursuit of the lane target ``preview_time``
+seconds ahead, which both anticipates the road curvature and corrects the heading, with a lead
+``lead_time`` on its drift) plus a near point correction of the lateral deviation outside a
+tolerated band (a soft dead zone of width ``lane_tolerance``), growing with the square of the
+deviation (doubled at ``edge_deviation``) as the car nears the lane markings. The lane target
+cuts corners towards the inside by ``corner_cutting * lane_tolerance`` at a 300 m radius
+(proportional to curvature) and wanders slowly (``lane_wander``, attention). The demanded
+curvature becomes a desired steering-wheel angle through the driver's internal model of the
+vehicle (``vehicle_model_gain`` times the true steady-state gain). A driver with
+``hold_time > 0`` updates this desired angle intermittently (sample and hold), which gives the
+step-like corrections of a novice.
+
+Neuromuscular layer (steering feel): the command torque is the feed-forward torque the driver
+expects the steering to need at the desired angle (internal model of the aligning torque and the
+power assist, scaled by ``feel_gain``) plus the arm stiffness times the desired angle; it passes
+through a first-order muscle activation lag. The arm impedance (stiffness on the actual angle,
+damping, inertia) acts at the wheel without lag.
+Remnant: coloured noise on the desired angle, and on the torque scaled with the control effort.
+"""
+
+import math
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+from scipy.signal import lfilter
+
+
+@dataclass(frozen=True)
+class DriverParameters:
+    """Parameters of a virtual driver (SI units; see the module docstring for their role)."""
+
+    reaction_time: float  # [s] perception-to-action delay of the visual layer
+    preview_time: float  # [s] far point time ahead (distance = speed * time)
+    lead_time: float  # [s] anticipation on the far-point error rate
+    near_gain: float  # [1/m^2] curvature per metre of lateral deviation outside the band
+    lane_tolerance: float  # [m] tolerated lateral deviation (soft dead zone half-width)
+    edge_deviation: float  # [m] deviation at which the near correction doubles (0: constant)
+    corner_cutting: float  # [-] lateral shift to the inside, in lane_tolerance at R = 300 m
+    vehicle_model_gain: float  # [-] internal steady-state steering gain / true gain
+    feel_gain: float  # [-] internal steering-feel torque / true steady-state torque
+    arm_stiffness: float  # [Nm/rad] stiffness on the steering-wheel angle error
+    arm_damping: float  # [Nms/rad] intrinsic damping of the arms
+    arm_inertia: float  # [kg m^2] inertia of the arms at the wheel
+    activation_time: float  # [s] first-order muscle activation lag
+    hold_time: float  # [s] intermittent update period of the desired angle (0: continuous)
+    angle_remnant: float  # [rad] RMS coloured noise on the desired angle
+    angle_remnant_time: float  # [s] correlation time of the angle remnant
+    torque_remnant: float  # [Nm] RMS coloured torque noise at zero effort
+    torque_remnant_effort: float  # [-] extra torque noise per Nm of command torque
+    lane_wander: float  # [m] RMS slow drift of the lateral target
+    lane_wander_time: float  # [s] correlation time of the drift
+    variability: float  # [-] log-normal spread of the parameters between recordings
+
+
+#: Named driving styles. "defensive" and "aggressive" follow the thesis' IPGDriver presets
+#: (Table C.1: corner cutting 0.2 and 0.8, tolerated lateral deviation 0.5 and 1.0 m): the
+#: aggressive driver previews further, reacts faster, cuts corners and tolerates more deviation,
+#: and so needs slightly less steering angle and torque; the defensive driver lags behind the
+#: corners. "novice" reacts late, over-corrects with high gains and updates its steering
+#: intermittently (jerky corrections). Each recording draws its own parameters around these.
+DRIVER_STYLES = {
+    "defensive": DriverParameters(
+        reaction_time=0.25,
+        preview_time=1.3,
+        lead_time=0.1,
+        near_gain=0.0015,
+        lane_tolerance=0.5,
+        edge_deviation=1.5,
+        corner_cutting=0.2,
+        vehicle_model_gain=0.9,
+        feel_gain=0.9,
+        arm_stiffness=4.0,
+        arm_damping=0.4,
+        arm_inertia=0.06,
+        activation_time=0.12,
+        hold_time=0.0,
+        angle_remnant=0.01,
+        angle_remnant_time=0.5,
+        torque_remnant=0.1,
+        torque_remnant_effort=0.05,
+        lane_wander=0.35,
+        lane_wander_time=6.0,
+        variability=0.08,
+    ),
+    "aggressive": DriverParameters(
+        reaction_time=0.18,
+        preview_time=1.4,
+        lead_time=0.2,
+        near_gain=0.001,
+        lane_tolerance=1.0,
+        edge_deviation=1.5,
+        corner_cutting=0.8,
+        vehicle_model_gain=0.97,
+        feel_gain=1.0,
+        arm_stiffness=6.0,
+        arm_damping=0.3,
+        arm_inertia=0.05,
+        activation_time=0.08,
+        hold_time=0.0,
+        angle_remnant=0.01,
+        angle_remnant_time=0.4,
+        torque_remnant=0.1,
+        torque_remnant_effort=0.05,
+        lane_wander=0.25,
+        lane_wander_time=6.0,
+        variability=0.08,
+    ),
+    "novice": DriverParameters(
+        reaction_time=0.25,
+        preview_time=1.3,
+        lead_time=0.3,
+        near_gain=0.003,
+        lane_tolerance=0.3,
+        edge_deviation=0.0,
+        corner_cutting=0.0,
+        vehicle_model_gain=0.9,
+        feel_gain=0.7,
+        arm_stiffness=8.0,
+        arm_damping=0.3,
+        arm_inertia=0.07,
+        activation_time=0.1,
+        hold_time=0.2,
+        angle_remnant=0.02,
+        angle_remnant_time=0.3,
+        torque_remnant=0.2,
+        torque_remnant_effort=0.1,
+        lane_wander=0.25,
+        lane_wander_time=4.0,
+        variability=0.1,
+    ),
+}
+
+# Parameters kept fixed between recordings of a style.
+_FIXED = ("variability", "hold_time", "corner_cutting", "edge_deviation")
+
+
+def check_driver(driver):
+    """Return the :class:`DriverParameters` of a style name or of a parameter object."""
+    if isinstance(driver, DriverParameters):
+        return driver
+    if isinstance(driver, str) and driver in DRIVER_STYLES:
+        return DRIVER_STYLES[driver]
+    raise ValueError(
+        f"Unknown driver style driver={driver!r}; expected one of {sorted(DRIVER_STYLES)} "
+        "or a DriverParameters instance."
+    )
+
+
+def sample_driver(parameters, rng):
+    """Draw the parameters of one recording: each multiplied by a log-normal factor."""
+    changes = {}
+    for field in fields(parameters):
+        if field.name in _FIXED:
+            continue
+        factor = math.exp(parameters.variability * rng.standard_normal())
+        changes[field.name] = getattr(parameters, field.name) * factor
+    return replace(parameters, **changes)
+
+
+def coloured_noise(n, dt, correlation_time, rms, rng):
+    """Stationary first-order (Ornstein-Uhlenbeck) noise of given RMS, sampled every ``dt``."""
+    white = rng.standard_normal(n + 1)
+    if rms <= 0.0:
+        return np.zeros(n)
+    a = math.exp(-dt / max(correlation_time, dt))
+    b = math.sqrt(1.0 - a * a)
+    noise, _ = lfilter([b], [1.0, -a], white[1:], zi=[a * white[0]])
+    return rms * noise

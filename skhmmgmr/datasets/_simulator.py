@@ -1,0 +1,503 @@
+"""Closed-loop lane-keeping simulator: road, virtual driver, steering system and vehicle."""
+
+import math
+import numbers
+import os
+
+import numpy as np
+import pandas as pd
+from sklearn.utils import check_random_state
+
+from ._driver import check_driver, coloured_noise, sample_driver
+from ._road import SETTINGS, make_road, manoeuvre_offsets
+from ._schema import (
+    DRIVER,
+    FEATURE_NAMES,
+    FEATURE_UNITS,
+    RECORDING,
+    SETTING,
+    SPLIT,
+    TARGET,
+    TARGET_UNIT,
+    TIME,
+)
+from ._vehicle import VehicleParameters
+
+SCENARIOS = ("highway", "sharp_corners", "lane_change", "evasive")
+INTERNAL_RATE = 200.0  # [Hz] minimum integration rate
+PREVIEW_DISTANCES = (10.0, 30.0)  # [m] road sensors ahead of the front axle
+LOST_CONTROL = 10.0  # [m] lateral deviation at which the simulation stops
+CORNER_CUT_RADIUS = 300.0  # [m] radius at which the corner cut is corner_cutting * tolerance
+LINE_LIMIT = 0.8  # [m] largest intended offset from the lane centre (car half-width 0.9 m)
+
+# Bands (around Table C.2 of the thesis) that a 5-minute setting-7 highway section meets for
+# every driver style; checked by the test-suite. Angles in degrees.
+CALIBRATION_BANDS = {
+    "rms_torque": (1.0, 2.5),
+    "max_torque": (2.5, 8.0),
+    "rms_lateral_deviation": (0.05, 0.6),
+    "max_lateral_deviation": (0.1, 1.75),
+    "rms_lateral_acceleration": (0.5, 1.5),
+    "rms_steering_wheel_angle": (4.0, 12.0),
+    "max_steering_wheel_angle": (10.0, 40.0),
+}
+
+# Table C.2 of the thesis (IPG CarMaker virtual drivers, training data).
+THESIS_TABLE_C2 = pd.DataFrame(
+    {
+        "defensive": [
+            1.6705,
+            4.2637,
+            0.4131,
+            1.1285,
+            0.0626,
+            0.9998,
+            7.1144,
+            24.7497,
+            6.5095,
+            68.0953,
+        ],
+        "aggressive": [
+            1.6409,
+            4.0869,
+            0.4665,
+            1.4975,
+            0.0607,
+            0.9653,
+            6.8679,
+            22.7767,
+            6.1365,
+            170.187,
+        ],
+    },
+    index=[
+        "rms_torque",
+        "max_torque",
+        "rms_lateral_deviation",
+        "max_lateral_deviation",
+        "rms_lateral_velocity",
+        "rms_lateral_acceleration",
+        "rms_steering_wheel_angle",
+        "max_steering_wheel_angle",
+        "rms_steering_wheel_velocity",
+        "max_steering_wheel_velocity",
+    ],
+)
+
+
+def _check_positive(value, name):
+    if not isinstance(value, numbers.Real) or isinstance(value, bool) or not value > 0:
+        raise ValueError(f"{name} must be a positive number, got {name}={value!r}.")
+    return float(value)
+
+
+def _check_setting(setting):
+    if (
+        isinstance(setting, bool)
+        or not isinstance(setting, numbers.Integral)
+        or setting not in SETTINGS
+    ):
+        raise ValueError(
+            f"setting must be an integer from 1 to 7 (Table B.1), got setting={setting!r}."
+        )
+    return int(setting)
+
+
+def _check_scenario(scenario):
+    if scenario not in SCENARIOS:
+        raise ValueError(f"Unknown scenario={scenario!r}; expected one of {SCENARIOS}.")
+    return scenario
+
+
+def _simulate(road, offsets, vehicle, driver, speed, n_samples, n_sub, dt, rng):
+    """Integrate the closed loop with semi-implicit Euler; return logged states (n_samples, 14)."""
+    n_steps = n_samples * n_sub
+    u = speed
+    m, iz, lf, lr = vehicle.mass, vehicle.yaw_inertia, vehicle.front_distance, vehicle.rear_distance
+    cf, cr = vehicle.front_cornering_stiffness, vehicle.rear_cornering_stiffness
+    f_max = vehicle.friction_coefficient * vehicle.front_load
+    r_max = vehicle.friction_coefficient * vehicle.rear_load
+    ms_h = vehicle.sprung_mass * vehicle.roll_arm
+    ix, c_roll = vehicle.roll_inertia, vehicle.roll_damping
+    k_roll = vehicle.roll_stiffness - ms_h * 9.81
+    ratio = vehicle.steering_ratio
+    t_mech, t_pneu, slip_t = (
+        vehicle.mechanical_trail,
+        vehicle.pneumatic_trail,
+        vehicle.pneumatic_trail_slip,
+    )
+    b_sw, fric, fric_v = vehicle.wheel_damping, vehicle.wheel_friction, vehicle.friction_velocity
+    g0, g1, a_max = vehicle.assist_gain, vehicle.assist_gain_slope, vehicle.assist_max
+    # driver constants
+    j_arm, b_arm, k_arm = driver.arm_inertia, driver.arm_damping, driver.arm_stiffness
+    j_sw = vehicle.wheel_inertia
+    act_lag = dt / (driver.activation_time + dt)
+    look = speed * driver.preview_time
+    far_gain = 2.0 / (look * look)
+    lead = driver.lead_time
+    near_gain, tol = driver.near_gain, driver.lane_tolerance
+    inv_edge = 1.0 / driver.edge_deviation if driver.edge_deviation > 0 else 0.0
+    angle_gain = driver.vehicle_model_gain * vehicle.steering_angle_for_curvature(speed)
+    feel = driver.feel_gain * vehicle.aligning_stiffness(speed)
+    fb0, fb1 = 1.0 + g0, g1
+    n_delay = max(1, int(round(driver.reaction_time / dt)))
+    n_hold = int(round(driver.hold_time / dt))
+    # Lane target (manoeuvre offset + corner cut) and the far point on the road, tabulated.
+    grid = road.s
+    cut = driver.corner_cutting * tol * np.clip(road.curvature * CORNER_CUT_RADIUS, -1.5, 1.5)
+    far = road.lateral_offset(grid, look) + road.at(offsets, grid + look)
+    curv, near, far = road.curvature.tolist(), offsets.tolist(), far.tolist()
+    cut_near, cut_far = cut.tolist(), road.at(cut, grid + look).tolist()
+    inv_ds = 1.0 / (grid[1] - grid[0])
+    angle_noise = coloured_noise(
+        n_steps, dt, driver.angle_remnant_time, driver.angle_remnant, rng
+    ).tolist()
+    torque_noise = coloured_noise(n_steps, dt, 0.1, driver.torque_remnant, rng).tolist()
+    wander = coloured_noise(n_steps, dt, driver.lane_wander_time, driver.lane_wander, rng).tolist()
+    effort = driver.torque_remnant_effort
+
+    tanh, sin, cos, sqrt = math.tanh, math.sin, math.cos, math.sqrt
+    s = e_y = e_psi = s_d = e_y_d = e_psi_d = 0.0
+    theta = theta_d = v = r = phi = phi_d = 0.0
+    t_muscle = t_driver = theta_des = 0.0
+    delay_line = [0.0] * n_delay
+    log = np.empty((n_samples, 14))
+    row = 0
+    for k in range(n_steps):
+        x = s * inv_ds
+        i = int(x)
+        f = x - i
+        kappa = curv[i] + f * (curv[i + 1] - curv[i])
+        # the intended line (corner cut + wander) stays within LINE_LIMIT of the lane centre
+        line = cut_near[i] + f * (cut_near[i + 1] - cut_near[i]) + wander[k]
+        lane = near[i] + f * (near[i + 1] - near[i]) + max(-LINE_LIMIT, min(LINE_LIMIT, line))
+        line = cut_far[i] + f * (cut_far[i + 1] - cut_far[i]) + wander[k]
+        aim = far[i] + f * (far[i + 1] - far[i]) + max(-LINE_LIMIT, min(LINE_LIMIT, line))
+
+        # visual layer, acting after the reaction delay; the lead acts on the far-point drift
+        e_far = aim - e_y - look * e_psi
+        e_far += lead * ((far[i + 1] - far[i]) * inv_ds * s_d - e_y_d - look * e_psi_d)
+        e_near = e_y - lane
+        outside = e_near - tol * tanh(e_near / tol)
+        outside *= 1.0 + (e_near * inv_edge) ** 2
+        theta_vis = angle_gain * (far_gain * e_far - near_gain * outside) + angle_noise[k]
+        j = k % n_delay
+        delayed = delay_line[j]
+        delay_line[j] = theta_vis
+        if n_hold == 0 or k % n_hold == 0:
+            theta_des = delayed
+
+        # neuromuscular layer: the activation lag acts on the command (expected steering feel
+        # plus the equilibrium point of the arm stiffness), the arm impedance acts at once
+        load = feel * theta_des
+        t_ff = math.copysign((sqrt(fb0 * fb0 + 4.0 * fb1 * abs(load)) - fb0) / (2.0 * fb1), load)
+        t_muscle += act_lag * (t_ff + k_arm * theta_des - t_muscle)
+        t_hand = t_muscle - k_arm * theta
+        t_hand += (1.0 + effort * abs(t_hand)) * torque_noise[k]
+
+        # tyres, aligning torque, power assist (sensing last step's driver torque)
+        alpha_f = theta / ratio - (v + lf * r) / u
+        alpha_r = (lr * r - v) / u
+        force_f = f_max * tanh(cf * alpha_f / f_max)
+        force_r = r_max * tanh(cr * alpha_r / r_max)
+        trail = t_mech + t_pneu * max(0.0, 1.0 - abs(alpha_f) / slip_t)
+        # The boost gain is frozen at last step's torque, which makes the rigid-column balance
+        # J_sw theta'' = (1 + gain) T_d - loads, with T_d = T_hand - B theta' - J_arm theta'',
+        # linear in theta'' (a lagged assist would feed back the arm inertia and oscillate).
+        gain = g0 + g1 * abs(t_driver)
+        if gain * abs(t_driver) > a_max:
+            gain = a_max / abs(t_driver)
+        t_arm = t_hand - b_arm * theta_d
+        loads = force_f * trail / ratio + b_sw * theta_d + fric * tanh(theta_d / fric_v)
+        theta_dd = ((1.0 + gain) * t_arm - loads) / (j_sw + (1.0 + gain) * j_arm)
+        t_driver = t_arm - j_arm * theta_dd
+
+        # vehicle
+        v_d = (force_f + force_r) / m - u * r
+        r_d = (lf * force_f - lr * force_r) / iz
+        a_y = v_d + u * r
+        phi_dd = (ms_h * a_y - k_roll * phi - c_roll * phi_d) / ix
+        s_d = (u * cos(e_psi) - v * sin(e_psi)) / (1.0 - kappa * e_y)
+        e_y_d = u * sin(e_psi) + v * cos(e_psi)
+
+        if k % n_sub == 0:
+            if abs(e_y) > LOST_CONTROL:
+                raise RuntimeError(
+                    f"The driver lost control {k * dt:.1f} s into the recording "
+                    f"(lateral deviation {e_y:.1f} m); driver parameters: {driver}."
+                )
+            log[row] = (
+                theta,
+                theta_d,
+                theta_dd,
+                v,
+                a_y,
+                r,
+                r_d,
+                phi,
+                phi_d,
+                phi_dd,
+                s,
+                e_y,
+                e_psi,
+                t_driver,
+            )
+            row += 1
+
+        theta_d += dt * theta_dd
+        theta += dt * theta_d
+        v += dt * v_d
+        r += dt * r_d
+        phi_d += dt * phi_dd
+        phi += dt * phi_d
+        s += dt * s_d
+        e_y += dt * e_y_d
+        e_psi_d = r - kappa * s_d
+        e_psi += dt * e_psi_d
+    return log
+
+
+def _features(log, road, vehicle, speed):
+    """Candidate features of Table B.2 from the logged states and the road sensors."""
+    (theta, theta_d, theta_dd, v, a_y, r, r_d, phi, phi_d, phi_dd, s, e_y, e_psi, torque) = log.T
+    lf = vehicle.front_distance
+    s_front = s + lf * np.cos(e_psi)
+    vehicle_heading = road.at(road.heading, s) + e_psi
+    columns = {
+        "steering_wheel_angle": theta,
+        "steering_wheel_velocity": theta_d,
+        "steering_wheel_acceleration": theta_dd,
+        "lateral_velocity": v,
+        "lateral_acceleration": a_y,
+        "slip_angle": np.arctan2(v, speed),
+        "yaw_rate": r,
+        "yaw_acceleration": r_d,
+        "roll_angle": phi,
+        "roll_velocity": phi_d,
+        "roll_acceleration": phi_dd,
+        "lateral_deviation_0m": e_y + lf * np.sin(e_psi),
+        "heading_deviation_0m": vehicle_heading - road.at(road.heading, s_front),
+        "road_curvature_0m": road.at(road.curvature, s_front),
+    }
+    for distance in PREVIEW_DISTANCES:
+        ahead = s_front + distance
+        columns[f"heading_deviation_{distance:.0f}m"] = vehicle_heading - road.at(
+            road.heading, ahead
+        )
+        columns[f"road_curvature_{distance:.0f}m"] = road.at(road.curvature, ahead)
+    return {name: columns[name] for name in FEATURE_NAMES}, torque
+
+
+def _make_lane_keeping(
+    duration,
+    setting,
+    driver,
+    speed_kmh,
+    sampling_rate,
+    scenario,
+    random_state,
+    road_random_state,
+    recording,
+    split,
+):
+    rng = check_random_state(random_state)
+    road_rng = rng if road_random_state is None else check_random_state(road_random_state)
+    style = driver if isinstance(driver, str) else "custom"
+    parameters = sample_driver(check_driver(driver), rng)
+    vehicle = VehicleParameters()
+    speed = speed_kmh / 3.6
+    n_samples = int(round(duration * sampling_rate))
+    n_sub = max(1, math.ceil(INTERNAL_RATE / sampling_rate))
+    dt = 1.0 / (sampling_rate * n_sub)
+    margin = 300.0 + speed * parameters.preview_time * 2.0
+    length = speed * duration * 1.05 + margin
+    road = make_road(length, setting=setting, scenario=scenario, random_state=road_rng)
+    offsets = manoeuvre_offsets(road, scenario, road_rng)
+    log = _simulate(road, offsets, vehicle, parameters, speed, n_samples, n_sub, dt, rng)
+    features, torque = _features(log, road, vehicle, speed)
+    if recording is None:
+        recording = f"{style}-{scenario}-s{setting}"
+    frame = pd.DataFrame(
+        {
+            RECORDING: np.full(n_samples, str(recording), dtype=object),
+            DRIVER: np.full(n_samples, style, dtype=object),
+            SETTING: np.full(n_samples, setting, dtype=np.int64),
+            SPLIT: np.full(n_samples, split, dtype=object),
+            TIME: np.arange(n_samples) / sampling_rate,
+            **features,
+            TARGET: torque,
+        }
+    )
+    frame.attrs["units"] = {TIME: "s", **FEATURE_UNITS, TARGET: TARGET_UNIT}
+    frame.attrs["scenario"] = scenario
+    frame.attrs["speed"] = speed
+    return frame
+
+
+def make_lane_keeping(
+    duration=300.0,
+    *,
+    setting=7,
+    driver="defensive",
+    speed_kmh=100.0,
+    sampling_rate=100.0,
+    scenario="highway",
+    random_state=None,
+    road_random_state=None,
+    recording=None,
+    split="train",
+    cache=None,
+):
+    """Simulate a driver keeping the centre lane of a pseudo-random highway section.
+
+    A closed-loop simulation (thesis Appendices B and C.1) of a virtual driver that steers with
+    torque (preview, reaction delay, internal model of the steering feel, neuromuscular lag,
+    coloured remnant), a steering system with power assist and self-aligning torque, and a
+    single-track vehicle with tyre saturation and roll, on a road of straights and circular
+    arcs joined by clothoids (Table B.1), three lanes of 3.5 m, at constant speed.
+
+    Parameters
+    ----------
+    duration : float, default=300.0
+        Length of the recording [s].
+    setting : int, default=7
+        Radius setting of Table B.1: 1 S (300-600 m), 2 M (600-900), 3 L (900-1200),
+        4 SM (300-900), 5 ML (600-1200), 6 SL (300-600 and 900-1200), 7 SML (300-1200).
+    driver : str or DriverParameters, default="defensive"
+        A key of :data:`DRIVER_STYLES` ("defensive", "aggressive", "novice") or parameters.
+        Each recording draws its own parameters around the style's (per-recording variability).
+    speed_kmh : float, default=100.0
+        Constant forward speed [km/h] (the thesis drives at 100 km/h).
+    sampling_rate : float, default=100.0
+        Logging rate [Hz]. The model is integrated at a multiple of it, at least 200 Hz.
+    scenario : {"highway", "sharp_corners", "lane_change", "evasive"}, default="highway"
+        "highway" is the thesis' protocol. Stress scenarios (thesis Appendix E.4):
+        "sharp_corners" uses radii of 175-300 m (25 m grid) instead of the setting's;
+        "lane_change" moves to a neighbouring lane and back every 300-800 m; "evasive" adds
+        sudden 2.5-3.5 m double lane changes over 30-40 m. The lateral deviation stays measured
+        from the centre lane.
+    random_state : int, RandomState instance or None, default=None
+        Seeds the road, the driver parameters and the remnant noise. Same int, same DataFrame.
+    road_random_state : int, RandomState instance or None, default=None
+        Seeds the road (and the manoeuvres) separately, so that several drivers can drive the
+        same section; by default the road is drawn from ``random_state``.
+    recording : str, default=None
+        Recording id; defaults to ``"{driver}-{scenario}-s{setting}"``.
+    split : str, default="train"
+        Value of the ``split`` column.
+    cache : str, path or joblib.Memory, default=None
+        Cache the simulation on disk (only used when ``random_state`` is an int and
+        ``road_random_state`` an int or None).
+
+    Returns
+    -------
+    frame : pandas.DataFrame
+        One row per sample: ``recording, driver, setting, split, time`` then the 18 candidate
+        features :data:`FEATURE_NAMES` (Table B.2) then ``driver_torque``. SI units, listed in
+        ``frame.attrs["units"]``. Signs: y and yaw to the left; roll positive when the body
+        leans right (outwards in a left turn); deviations are vehicle minus road (lateral at the
+        front axle, heading at the road sensors at 0, 10 and 30 m ahead of the front axle);
+        curvature positive in left turns.
+
+    Notes
+    -----
+    Calibration. Over one 5-minute setting-7 section, every style stays within these bands
+    (:data:`CALIBRATION_BANDS`, checked by the tests; thesis Table C.2 in brackets): RMS torque
+    1-2.5 Nm (1.64-1.67), max torque 2.5-8 Nm (4.1-4.3), RMS lateral deviation 0.05-0.6 m
+    (0.41-0.47), max lateral deviation below 1.75 m (1.1-1.5; the vehicle centre never leaves
+    the lane), RMS lateral acceleration 0.5-1.5 m/s^2 (0.97-1.0), RMS steering-wheel angle
+    4-12 deg (6.9-7.1), max 10-40 deg (22.8-24.7). Use :func:`calibration_table` to compute them.
+
+    Examples
+    --------
+    >>> from skhmmgmr.datasets import make_lane_keeping
+    >>> frame = make_lane_keeping(duration=10.0, driver="aggressive", random_state=0)
+    >>> frame.shape
+    (1000, 24)
+    >>> frame.attrs["units"]["driver_torque"]
+    'Nm'
+    """
+    duration = _check_positive(duration, "duration")
+    sampling_rate = _check_positive(sampling_rate, "sampling_rate")
+    speed_kmh = _check_positive(speed_kmh, "speed_kmh")
+    setting = _check_setting(setting)
+    scenario = _check_scenario(scenario)
+    check_driver(driver)
+    if int(round(duration * sampling_rate)) < 1:
+        raise ValueError(f"duration={duration} s holds no sample at sampling_rate={sampling_rate}.")
+    args = (duration, setting, driver, speed_kmh, sampling_rate, scenario, random_state)
+    args += (road_random_state, recording, split)
+    seeded = isinstance(random_state, numbers.Integral) and (
+        road_random_state is None or isinstance(road_random_state, numbers.Integral)
+    )
+    if cache is not None and seeded:
+        return _cached(cache)(*args)
+    return _make_lane_keeping(*args)
+
+
+def _cached(cache):
+    from joblib import Memory
+
+    if isinstance(cache, (str, os.PathLike)):
+        cache = Memory(os.fspath(cache), verbose=0)
+    if not hasattr(cache, "cache"):
+        raise ValueError(f"cache must be a directory or a joblib.Memory, got cache={cache!r}.")
+    return cache.cache(_make_lane_keeping)
+
+
+def calibration_table(frame, by="recording"):
+    """Driver statistics of Table C.2 (RMS and max of torque, deviation, angle...).
+
+    Parameters
+    ----------
+    frame : pandas.DataFrame
+        Output of :func:`make_lane_keeping` or :func:`make_driving_protocol`.
+    by : {"recording", "driver"}, default="recording"
+        Group the samples per recording or pool them per driver (as Table C.2 does).
+
+    Returns
+    -------
+    table : pandas.DataFrame
+        One row per group; torque in Nm, deviation in m, velocities in m/s, accelerations in
+        m/s^2, steering-wheel angle in deg and its velocity in deg/s. Compare with
+        :data:`THESIS_TABLE_C2` and :data:`CALIBRATION_BANDS`.
+
+    Examples
+    --------
+    >>> from skhmmgmr.datasets import calibration_table, make_lane_keeping
+    >>> table = calibration_table(make_lane_keeping(duration=20.0, random_state=0))
+    >>> list(table.columns[:2])
+    ['driver', 'setting']
+    """
+    if by not in (RECORDING, DRIVER):
+        raise ValueError(f"by must be 'recording' or 'driver', got by={by!r}.")
+
+    def rms(x):
+        return float(np.sqrt(np.mean(np.square(x))))
+
+    def peak(x):
+        return float(np.max(np.abs(x)))
+
+    rows = {}
+    for key, group in frame.groupby(by, sort=False):
+        angle = np.degrees(group["steering_wheel_angle"].to_numpy())
+        rate = np.degrees(group["steering_wheel_velocity"].to_numpy())
+        deviation = group["lateral_deviation_0m"].to_numpy()
+        torque = group[TARGET].to_numpy()
+        rows[key] = {
+            DRIVER: group[DRIVER].iloc[0] if by == RECORDING else key,
+            SETTING: group[SETTING].iloc[0] if by == RECORDING else "all",
+            "rms_torque": rms(torque),
+            "max_torque": peak(torque),
+            "rms_lateral_deviation": rms(deviation),
+            "max_lateral_deviation": peak(deviation),
+            "rms_lateral_velocity": rms(group["lateral_velocity"]),
+            "rms_lateral_acceleration": rms(group["lateral_acceleration"]),
+            "rms_steering_wheel_angle": rms(angle),
+            "max_steering_wheel_angle": peak(angle),
+            "rms_steering_wheel_velocity": rms(rate),
+            "max_steering_wheel_velocity": peak(rate),
+        }
+    table = pd.DataFrame.from_dict(rows, orient="index")
+    table.index.name = by
+    return table

@@ -1,0 +1,296 @@
+"""Tests of the embedded lane-keeping simulator and the driving protocol."""
+
+from collections import Counter
+
+import joblib
+import numpy as np
+import pandas as pd
+import pytest
+
+from skhmmgmr.datasets import (
+    CALIBRATION_BANDS,
+    DRIVER_STYLES,
+    FEATURE_NAMES,
+    FEATURE_UNITS,
+    TARGET,
+    DriverParameters,
+    calibration_table,
+    make_driving_protocol,
+    make_lane_keeping,
+)
+from skhmmgmr.datasets._road import (
+    ANGLES,
+    CLOTHOID_LENGTH,
+    GRID_STEP,
+    SETTINGS,
+    SHARP_CORNER_RADII,
+    STRAIGHT_LENGTHS,
+    _cumulative_trapezoid,
+    make_road,
+    step_curvature,
+)
+from skhmmgmr.datasets._schema import META_COLUMNS
+
+SPEED = 100.0 / 3.6
+
+
+@pytest.fixture(scope="module")
+def corner_drive():
+    """One minute of sharp corners (setting 1), shared by the physics tests."""
+    return make_lane_keeping(60.0, setting=1, random_state=3)
+
+
+@pytest.fixture(scope="module")
+def calibration_drives():
+    """One 5-minute setting-7 section per style (speed is measured in benchmarks/)."""
+    return {
+        style: make_lane_keeping(300.0, driver=style, setting=7, random_state=0)
+        for style in DRIVER_STYLES
+    }
+
+
+def test_same_seed_same_frame():
+    first = make_lane_keeping(5.0, driver="novice", random_state=42)
+    second = make_lane_keeping(5.0, driver="novice", random_state=42)
+    pd.testing.assert_frame_equal(first, second)
+    other = make_lane_keeping(5.0, driver="novice", random_state=43)
+    assert not np.allclose(first[TARGET], other[TARGET])
+
+
+def test_columns_units_and_sampling():
+    frame = make_lane_keeping(2.0, sampling_rate=50.0, random_state=0, recording="r", split="test")
+    assert list(frame.columns) == [*META_COLUMNS, *FEATURE_NAMES, TARGET]
+    assert frame.shape == (100, 24)
+    np.testing.assert_allclose(frame["time"], np.arange(100) / 50.0)
+    assert frame.attrs["units"] == {"time": "s", **FEATURE_UNITS, TARGET: "Nm"}
+    assert set(frame["recording"]) == {"r"} and set(frame["split"]) == {"test"}
+    assert set(frame["driver"]) == {"defensive"} and set(frame["setting"]) == {7}
+    assert np.isfinite(frame[[*FEATURE_NAMES, TARGET]].to_numpy()).all()
+
+
+@pytest.mark.parametrize("setting", sorted(SETTINGS))
+def test_road_elements_follow_table_b1(setting):
+    road = make_road(8000.0, setting=setting, random_state=np.random.RandomState(setting))
+    arcs = [e for e in road.elements if e["kind"] == "arc"]
+    straights = [e for e in road.elements if e["kind"] == "straight"]
+    radii = [e["radius"] for e in arcs]
+    assert set(radii) <= set(SETTINGS[setting][1])
+    assert all(r % 100 == 0 for r in radii)
+    assert {e["angle"] for e in arcs} <= set(ANGLES)
+    assert {e["length"] for e in straights} <= set(STRAIGHT_LENGTHS)
+    for element in arcs:
+        assert element["length"] == pytest.approx(element["radius"] * np.radians(element["angle"]))
+    # balanced: counts differ by at most one (plus the unfinished last round)
+    for counts in (
+        Counter(e["direction"] for e in road.elements),
+        Counter(radii),
+        Counter(e["angle"] for e in arcs),
+    ):
+        assert max(counts.values()) - min(counts.values()) <= 2
+    assert len(Counter(radii)) == len(SETTINGS[setting][1])
+
+
+def test_road_curvature_is_continuous_and_keeps_the_heading():
+    road = make_road(6000.0, setting=7, random_state=np.random.RandomState(0))
+    # a linear ramp over CLOTHOID_LENGTH between at most +-1/300
+    max_step = 2.0 / 300.0 * GRID_STEP / CLOTHOID_LENGTH
+    assert np.abs(np.diff(road.curvature)).max() <= max_step * 1.05
+    step_heading = _cumulative_trapezoid(step_curvature(road.elements, road.s.size), GRID_STEP)
+    # exact wherever the step curvature is constant over the ramp length around the point
+    long_elements = [e for e in road.elements[:-1] if e["length"] > CLOTHOID_LENGTH + 1.0]
+    assert len(long_elements) > 10
+    for element in long_elements:
+        middle = int((element["start"] + element["length"] / 2) / GRID_STEP)
+        assert road.heading[middle] == pytest.approx(step_heading[middle], abs=2e-3)
+
+
+def test_sharp_corner_scenario_radii():
+    road = make_road(4000.0, scenario="sharp_corners", random_state=np.random.RandomState(0))
+    radii = {e["radius"] for e in road.elements if e["kind"] == "arc"}
+    assert radii <= set(SHARP_CORNER_RADII) and min(radii) < 300
+
+
+def test_slip_angle_is_lateral_velocity_over_speed(corner_drive):
+    np.testing.assert_allclose(
+        corner_drive["slip_angle"], corner_drive["lateral_velocity"] / SPEED, atol=1e-6
+    )
+
+
+def test_vehicle_physics_is_consistent(corner_drive):
+    frame = corner_drive
+    dt = 0.01
+    yaw_rate = frame["yaw_rate"].to_numpy()
+    a_y = frame["lateral_acceleration"].to_numpy()
+    # in the middle of steady corners, yaw rate = speed * curvature
+    steady = (frame["road_curvature_0m"].abs() > 1 / 700) & (
+        (frame["road_curvature_0m"] - frame["road_curvature_30m"]).abs() < 1e-5
+    )
+    assert steady.sum() > 500
+    ratio = yaw_rate[steady].mean() / (SPEED * frame.loc[steady, "road_curvature_0m"].mean())
+    assert 0.85 < ratio < 1.15
+    # lateral acceleration = speed * yaw rate + dv/dt, dominated by the first term
+    assert np.corrcoef(a_y, SPEED * yaw_rate)[0, 1] > 0.98
+    # derivatives come from the model and agree with the logged signals
+    for signal, rate in [
+        ("steering_wheel_angle", "steering_wheel_velocity"),
+        ("yaw_rate", "yaw_acceleration"),
+        ("roll_angle", "roll_velocity"),
+        ("steering_wheel_velocity", "steering_wheel_acceleration"),
+    ]:
+        numeric = np.gradient(frame[signal].to_numpy(), dt)
+        assert np.corrcoef(numeric, frame[rate])[0, 1] > 0.9, rate
+    # the body rolls outwards (positive roll in a left turn, y to the left)
+    assert np.corrcoef(frame["roll_angle"], a_y)[0, 1] > 0.9
+    # steering, torque and curvature all share the sign convention
+    assert np.corrcoef(frame["steering_wheel_angle"], frame["road_curvature_0m"])[0, 1] > 0.9
+    assert np.corrcoef(frame[TARGET], frame["steering_wheel_angle"])[0, 1] > 0.8
+    # the road ahead turns away from the vehicle heading by about curvature * distance
+    heading_change = frame["heading_deviation_0m"] - frame["heading_deviation_30m"]
+    assert np.corrcoef(heading_change, frame["road_curvature_10m"])[0, 1] > 0.95
+
+
+def test_calibration_bands_per_style(calibration_drives):
+    frames = calibration_drives
+    table = calibration_table(pd.concat(frames.values()))
+    assert list(table["driver"]) == list(DRIVER_STYLES)
+    for style, row in table.set_index("driver").iterrows():
+        for kpi, (low, high) in CALIBRATION_BANDS.items():
+            assert low <= row[kpi] <= high, (style, kpi, row[kpi])
+        # the vehicle centre never leaves the centre lane
+        assert np.abs(frames[style]["lateral_deviation_0m"]).max() < 1.75
+    # Table C.2: the aggressive driver needs less torque and angle, deviates more
+    by_style = table.set_index("driver")
+    assert by_style.loc["aggressive", "rms_torque"] < by_style.loc["defensive", "rms_torque"]
+    assert (
+        by_style.loc["aggressive", "max_steering_wheel_angle"]
+        < by_style.loc["defensive", "max_steering_wheel_angle"]
+    )
+    # the novice corrects in jerks
+    assert (
+        by_style.loc["novice", "rms_steering_wheel_velocity"]
+        > 1.3 * by_style.loc["defensive", "rms_steering_wheel_velocity"]
+    )
+
+
+def test_calibration_table_by_driver():
+    frame = pd.concat(
+        [
+            make_lane_keeping(3.0, driver="defensive", random_state=0, recording="a"),
+            make_lane_keeping(3.0, driver="defensive", random_state=1, recording="b"),
+        ]
+    )
+    assert list(calibration_table(frame).index) == ["a", "b"]
+    pooled = calibration_table(frame, by="driver")
+    assert list(pooled.index) == ["defensive"]
+    expected = np.sqrt(np.mean(frame[TARGET] ** 2))
+    assert pooled.loc["defensive", "rms_torque"] == pytest.approx(expected)
+    with pytest.raises(ValueError, match="by"):
+        calibration_table(frame, by="split")
+
+
+@pytest.mark.parametrize(
+    "scenario, kpi",
+    [
+        ("sharp_corners", "rms_torque"),
+        ("lane_change", "rms_lateral_deviation"),
+        ("evasive", "max_torque"),
+    ],
+)
+def test_stress_scenarios_are_harder(scenario, kpi):
+    kwargs = dict(duration=120.0, driver="defensive", random_state=5)
+    base = calibration_table(make_lane_keeping(scenario="highway", **kwargs))
+    stress = calibration_table(make_lane_keeping(scenario=scenario, **kwargs))
+    assert stress[kpi].iloc[0] > 1.2 * base[kpi].iloc[0]
+
+
+def test_custom_driver_parameters():
+    slow = DRIVER_STYLES["defensive"].__class__(
+        **{**DRIVER_STYLES["defensive"].__dict__, "reaction_time": 0.4, "variability": 0.0}
+    )
+    assert isinstance(slow, DriverParameters)
+    frame = make_lane_keeping(3.0, driver=slow, random_state=0)
+    assert set(frame["driver"]) == {"custom"}
+
+
+def test_protocol_shape_and_ids():
+    frame = make_driving_protocol(
+        ("defensive", "aggressive"),
+        n_train_per_setting=1,
+        n_validation=2,
+        n_test=1,
+        duration=2.0,
+        sampling_rate=20.0,
+        random_state=0,
+    )
+    recordings = frame.groupby("recording", sort=False)
+    assert recordings.ngroups == 2 * (6 + 2 + 1)
+    assert len(frame) == recordings.ngroups * 40
+    first = recordings.first()
+    counts = first.groupby(["driver", "split"]).size().unstack()
+    assert (counts["train"] == 6).all() and (counts["validation"] == 2).all()
+    assert (counts["test"] == 1).all()
+    assert set(first.loc[first["split"] == "train", "setting"]) == {1, 2, 3, 4, 5, 6}
+    assert set(first.loc[first["split"] != "train", "setting"]) == {7}
+    assert "defensive-train-s1-0" in first.index and "aggressive-test-s7-0" in first.index
+    # contiguous, time ordered recordings
+    ids = frame["recording"].to_numpy()
+    assert (ids[1:] != ids[:-1]).sum() == recordings.ngroups - 1
+    for _, group in recordings:
+        assert group["time"].iloc[0] == 0.0 and (np.diff(group["time"]) > 0).all()
+    # every driver drives the same road sections
+    road = frame.set_index(["recording", "time"])["road_curvature_30m"]
+    np.testing.assert_array_equal(
+        road["defensive-validation-s7-1"], road["aggressive-validation-s7-1"]
+    )
+    assert frame.attrs["units"][TARGET] == "Nm"
+
+
+def test_protocol_parallel_matches_serial():
+    kwargs = dict(n_train_per_setting=1, n_validation=1, n_test=0, duration=1.0, random_state=1)
+    serial = make_driving_protocol(("novice",), **kwargs)
+    parallel = make_driving_protocol(("novice",), n_jobs=2, **kwargs)
+    pd.testing.assert_frame_equal(serial, parallel)
+
+
+def test_disk_cache(tmp_path):
+    first = make_lane_keeping(2.0, random_state=7, cache=tmp_path)
+    assert any(tmp_path.rglob("*.pkl"))
+    second = make_lane_keeping(2.0, random_state=7, cache=joblib.Memory(tmp_path, verbose=0))
+    pd.testing.assert_frame_equal(first, second)
+    with pytest.raises(ValueError, match="cache"):
+        make_lane_keeping(2.0, random_state=7, cache=3)
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        (dict(driver="reckless"), "driver"),
+        (dict(setting=0), "setting"),
+        (dict(setting=8), "setting"),
+        (dict(setting=2.0), "setting"),
+        (dict(duration=0.0), "duration"),
+        (dict(duration=-5.0), "duration"),
+        (dict(sampling_rate=0.0), "sampling_rate"),
+        (dict(speed_kmh=-1.0), "speed_kmh"),
+        (dict(scenario="city"), "scenario"),
+    ],
+)
+def test_bad_parameters_name_the_parameter(kwargs, name):
+    kwargs = {"duration": 1.0, **kwargs}
+    with pytest.raises(ValueError, match=name):
+        make_lane_keeping(**kwargs)
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        (dict(drivers=("defensive", "reckless")), "drivers"),
+        (dict(drivers=()), "drivers"),
+        (dict(n_validation=-1), "n_validation"),
+        (dict(n_train_per_setting=1.5), "n_train_per_setting"),
+        (dict(n_train_per_setting=0, n_validation=0, n_test=0), "no section"),
+    ],
+)
+def test_bad_protocol_parameters(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        make_driving_protocol(duration=1.0, **kwargs)
