@@ -58,13 +58,14 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         Start probabilities ``pi``.
     transmat_ : ndarray of shape (n_states, n_states)
         Transition matrix; row ``j`` holds the probabilities of leaving state ``j``.
-    means_ : ndarray of shape (n_states, n_features_in_ + n_outputs_)
-        State means over the joint vector ``[inputs, outputs]``, in the data's units.
-    covars_ : ndarray of shape (n_states, n_features_in_ + n_outputs_, n_features_in_ + n_outputs_)
+    means_ : ndarray of shape (n_states, n_dims)
+        State means over the joint vector ``[inputs, outputs]``, in the data's units
+        (``n_dims = n_features_in_ + n_outputs_``).
+    covars_ : ndarray of shape (n_states, n_dims, n_dims)
         Full state covariances over the joint vector, in the data's units.
     n_features_in_ : int
         Number of input features.
-    feature_names_in_ : ndarray of shape (n_features_in_,)
+    feature_names_in_ : ndarray of shape (n_features,)
         Input names, when ``X`` has string column names.
     n_outputs_ : int
         Number of outputs (columns of ``y``).
