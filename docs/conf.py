@@ -48,3 +48,15 @@ sphinx_gallery_conf = {
     "within_subsection_order": "FileNameSortKey",
 }
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+def _skip_scikit_learn_members(app, what, name, obj, skip, options):
+    """Leave out methods inherited from scikit-learn: their docstrings cite its glossary."""
+    module = getattr(obj, "__module__", None) or ""
+    if what == "class" and module.startswith("sklearn."):
+        return True
+    return None
+
+
+def setup(app):
+    app.connect("autodoc-skip-member", _skip_scikit_learn_members)

@@ -136,14 +136,14 @@ class SpearmanSelector(SelectorMixin, BaseEstimator):
 
     Attributes
     ----------
-    scores_ : ndarray of shape (n_features_in_,)
+    scores_ : ndarray of shape (n_features,)
         Mean absolute Spearman correlation over recordings.
-    pvalues_ : ndarray of shape (n_features_in_,)
+    pvalues_ : ndarray of shape (n_features,)
         Fisher-combined p-values.
-    ranking_ : ndarray of shape (n_features_in_,)
+    ranking_ : ndarray of shape (n_features,)
         Rank of every feature, 1 = strongest.
     n_features_in_ : int
-    feature_names_in_ : ndarray of shape (n_features_in_,)
+    feature_names_in_ : ndarray of shape (n_features,)
         When ``X`` has string column names.
 
     Examples
@@ -246,7 +246,7 @@ class ExhaustiveFeatureSelector(RecordingSelector):
         ``smoothness``, ``converged``.
     subset_ : tuple of str
         Selected feature subset.
-    support_ : ndarray of shape (n_features_in_,)
+    support_ : ndarray of shape (n_features,)
         Mask of the selected subset.
     n_features_in_, feature_names_in_
         As in scikit-learn.
@@ -417,7 +417,7 @@ class ForwardFeatureSelector(RecordingSelector):
         Metrics of every evaluated subset on every validation recording (as in
         :class:`ExhaustiveFeatureSelector`).
     subset_ : tuple of str
-    support_ : ndarray of shape (n_features_in_,)
+    support_ : ndarray of shape (n_features,)
 
     Examples
     --------
