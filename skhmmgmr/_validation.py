@@ -39,9 +39,13 @@ def check_finite(values, *, name, column_names, recordings):
 def check_target_finite(y, groups):
     """Name the column and recording of a NaN or infinite target before generic validation."""
     try:
-        values = np.asarray(y, dtype=float)
+        values = np.asarray(y)
     except (TypeError, ValueError):
         return
+    # anything not plainly real-valued is left to scikit-learn's own validation
+    if values.dtype.kind not in "biuf":
+        return
+    values = values.astype(float, copy=False)
     if values.ndim not in (1, 2) or np.isfinite(values).all():
         return
     if groups is not None and len(groups) != values.shape[0]:
