@@ -1,4 +1,8 @@
-"""Command line: ``skhmmgmr demo | fit | predict`` (also ``python -m skhmmgmr``)."""
+"""Command line: ``skhmmgmr demo | select | report | fit | predict`` (``python -m skhmmgmr``).
+
+Errors the user can fix (a missing file or column, unreadable data) are printed without a
+traceback and end with exit code 2.
+"""
 
 import argparse
 import sys
@@ -6,10 +10,11 @@ import time
 from pathlib import Path
 
 import joblib
+import numpy as np
 import pandas as pd
 
 from .datasets import RECORDING, SPLIT, TARGET, TIME
-from .datasets._schema import FEATURE_NAMES, META_COLUMNS
+from .datasets._schema import META_COLUMNS
 
 
 class CommandError(Exception):
@@ -58,48 +63,232 @@ def _evaluation_table(model, frame, features, target, recording, sampling_period
     )
 
 
-def command_demo(args):
-    """Simulate drivers, fit the all-feature model and a two-feature model, compare on test."""
-    from .datasets import make_driving_protocol
-    from .estimator import HMMGMRRegressor
+DEMO_SCALES = {
+    # section length [s], features kept by the filter, largest K, trade-off step [%]
+    "default": dict(duration=20.0, n_top=6, k_max=8, trade_off_step=25),
+    "full": dict(duration=300.0, n_top=10, k_max=20, trade_off_step=10),
+}
 
-    scale = dict(duration=300.0) if args.full else dict(duration=args.duration)
-    started = time.perf_counter()
-    _log(args, f"Simulating drivers {args.drivers} ({scale['duration']:.0f} s sections, 20 Hz)")
-    data = make_driving_protocol(
-        drivers=tuple(args.drivers),
-        sampling_rate=20.0,
-        random_state=args.seed,
-        n_jobs=args.n_jobs,
-        **scale,
+
+def _progress(args, total, desc):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc, disable=getattr(args, "quiet", False), leave=False)
+
+
+def _per_driver(test, drivers):
+    table = test.assign(driver=test["recording"].map(drivers).fillna("unknown"))
+    return (
+        table.groupby(["driver", "model"], sort=False)[["rmse", "accuracy", "smoothness"]]
+        .mean()
+        .reset_index()
     )
-    train = data[data[SPLIT] == "train"]
-    test = data[data[SPLIT] == "test"]
-    subsets = {
-        "baseline (18 features)": list(FEATURE_NAMES),
-        "steering wheel angle + yaw rate": ["steering_wheel_angle", "yaw_rate"],
-    }
-    rows = []
-    for name, features in subsets.items():
-        _log(args, f"Fitting {name}, K={args.n_states}")
-        model = HMMGMRRegressor(n_states=args.n_states, random_state=args.seed)
-        model.fit(train[features], train[TARGET], groups=train[RECORDING].to_numpy())
-        table = _evaluation_table(model, test, features, TARGET, RECORDING, 0.05)
-        rows.append(
-            {
-                "model": name,
-                "n_features": len(features),
-                "accuracy [%]": table["accuracy"].mean(),
-                "smoothness [Nm/s]": table["smoothness"].mean(),
-                "rmse [Nm]": table["rmse"].mean(),
-            }
+
+
+def _run_framework(args, data, meta):
+    """select_parameters + figures + report folder; shared by ``demo`` and ``select``."""
+    from ._report import report_figures, report_tables, versions, write_report
+    from .metrics import trade_offs
+    from .selection import select_parameters
+
+    try:
+        relevance_trade_offs = trade_offs(args.trade_off_step)
+    except ValueError as exc:
+        raise CommandError(f"--trade-off-step: {exc}") from exc
+    period = float(data.groupby(RECORDING)[TIME].diff().median())
+    started = time.perf_counter()
+    bar = _progress(args, 3, "skhmmgmr")
+    bar.set_postfix_str("parameter selection")
+    try:
+        report = select_parameters(
+            data,
+            candidate_features=args.features,
+            n_top=args.n_top,
+            k_max=args.k_max,
+            trade_off=args.trade_off,
+            relevance_trade_offs=relevance_trade_offs,
+            sampling_period=period,
+            n_jobs=args.n_jobs,
+            progress=not args.quiet,
+            random_state=args.seed,
         )
-    summary = pd.DataFrame(rows).set_index("model")
-    print(summary.round(3).to_string())
-    output = Path(args.output)
-    output.mkdir(parents=True, exist_ok=True)
-    summary.to_csv(output / "test_comparison.csv")
-    _log(args, f"Wrote {output / 'test_comparison.csv'} in {time.perf_counter() - started:.1f} s")
+    except ValueError as exc:
+        raise CommandError(str(exc)) from exc
+    bar.update()
+    bar.set_postfix_str("figures")
+    per_driver = _per_driver(report.test, dict(zip(data[RECORDING], data["driver"], strict=False)))
+    figures = report_figures(report, data, sampling_period=period)
+    bar.update()
+    bar.set_postfix_str("report")
+    timings = {**meta.pop("timings", {}), **report.timings}
+    timings["total"] = (
+        sum(timings.values()) + time.perf_counter() - started - sum(report.timings.values())
+    )
+    details = {
+        **meta.pop("details", {}),
+        "selected features": ", ".join(report.features),
+        "selected number of states K": report.n_states,
+        "trade-off": report.trade_off,
+        "filter / K range": f"top {args.n_top} features, K = 1..{args.k_max}",
+        "relevance trade-offs": ", ".join(relevance_trade_offs),
+        "seed": args.seed,
+        "n_jobs": args.n_jobs,
+        **{f"time: {k} [s]": f"{v:.1f}" for k, v in timings.items()},
+    }
+    page = write_report(
+        args.output,
+        tables=report_tables(report, per_driver),
+        figures=figures,
+        meta={**meta, "details": details, "timings": timings, "versions": versions()},
+    )
+    bar.update()
+    bar.close()
+    columns = ["rmse", "accuracy", "smoothness", "performance_score", "n_features", "n_states"]
+    print(f"selected features: {', '.join(report.features)}; K = {report.n_states}")
+    print(report.test_summary.set_index("model")[columns].round(3).to_string())
+    print(per_driver.set_index(["driver", "model"]).round(3).to_string())
+    _log(args, f"Wrote {page} ({timings['total']:.1f} s)")
+    return 0
+
+
+def command_demo(args):
+    """Simulate several drivers, run the whole framework, compare with the baseline on test."""
+    from .datasets import make_driving_protocol
+
+    scale = DEMO_SCALES["full" if args.full else "default"]
+    for name, value in scale.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
+    _log(
+        args,
+        f"Simulating drivers {', '.join(args.drivers)}: 12 training, 6 validation and 6 test "
+        f"sections of {args.duration:.0f} s at {args.sampling_rate:g} Hz each",
+    )
+    started = time.perf_counter()
+    bar = _progress(args, 1, "simulation")
+    try:
+        data = make_driving_protocol(
+            drivers=tuple(args.drivers),
+            duration=args.duration,
+            sampling_rate=args.sampling_rate,
+            random_state=args.seed,
+            n_jobs=args.n_jobs,
+        )
+    except ValueError as exc:
+        raise CommandError(str(exc)) from exc
+    bar.update()
+    bar.close()
+    text = [
+        "skhmmgmr demo: the thesis' driving protocol simulated for the virtual drivers "
+        f"{', '.join(args.drivers)} (12 training sections on settings 1-6, 6 validation and 6 "
+        f"test sections on setting 7, {args.duration:.0f} s each at {args.sampling_rate:g} Hz, "
+        "100 km/h). The parameter selection framework (Spearman filter, exhaustive and "
+        "forward wrappers, feature relevance, Strict/Mild/Liberal candidates, state selection "
+        "with the 1% rule) chose the feature subset and K on the validation sections; the "
+        "final model and the all-feature baseline with the same K were trained on the "
+        "training sections and compared on the test sections.",
+    ]
+    details = {
+        "drivers": ", ".join(args.drivers),
+        "scale": "thesis (--full)" if args.full else "reduced (default)",
+        "section length [s]": args.duration,
+        "sampling rate [Hz]": args.sampling_rate,
+        "recordings": data[RECORDING].nunique(),
+    }
+    meta = {
+        "title": "skhmmgmr demo: driver steering-torque models",
+        "command": "demo",
+        "text": text,
+        "details": details,
+        "timings": {"simulation": time.perf_counter() - started},
+    }
+    return _run_framework(args, data, meta)
+
+
+def _assign_splits(frame, args):
+    """Train/validation/test by recording when the data has no usable split column."""
+    recordings = frame[RECORDING].unique()
+    if len(recordings) < 3:
+        raise CommandError(
+            f"{args.data}: {len(recordings)} recording(s); the framework needs at least 3 "
+            "(training, validation and test)"
+        )
+    order = np.random.default_rng(args.seed).permutation(recordings)
+    n_val = max(1, round(args.validation_fraction * len(order)))
+    n_test = max(1, round(args.test_fraction * len(order)))
+    if n_val + n_test >= len(order):
+        raise CommandError("--validation-fraction + --test-fraction leave no training recording")
+    split = {r: "validation" for r in order[:n_val]}
+    split.update({r: "test" for r in order[n_val : n_val + n_test]})
+    return frame[RECORDING].map(split).fillna("train")
+
+
+def command_select(args):
+    """The framework on the user's recordings."""
+    from .datasets import load_recordings
+
+    path = Path(args.data)
+    if not path.exists():
+        raise CommandError(f"data file not found: {path}")
+    source = path
+    if path.is_file():
+        source = _read_table(path)
+        _check_columns(source, [args.recording, args.target, args.time], path)
+        if args.split in source.columns and args.split != SPLIT:
+            source = source.drop(columns=SPLIT, errors="ignore").rename(columns={args.split: SPLIT})
+        if args.features:
+            _check_columns(source, args.features, path)
+    try:
+        data = load_recordings(
+            source,
+            recording=args.recording,
+            time=args.time,
+            target=args.target,
+            features=args.features,
+        )
+    except ValueError as exc:
+        raise CommandError(f"{path}: {exc}") from exc
+    splits = set(data[SPLIT])
+    if splits <= {"train", "validation", "test"} and len(splits) == 3:
+        rule = f"the '{args.split}' column"
+    elif splits == {"unknown"}:
+        data[SPLIT] = _assign_splits(data, args)
+        rule = (
+            f"recordings drawn at random (seed {args.seed}): {args.validation_fraction:.0%} "
+            f"validation, {args.test_fraction:.0%} test, the rest training"
+        )
+    else:
+        raise CommandError(
+            f"{path}: the '{args.split}' column must hold 'train', 'validation' and 'test' "
+            f"(found {sorted(map(str, splits))}); drop it to split by recording"
+        )
+    counts = data.groupby(SPLIT)[RECORDING].nunique().to_dict()
+    meta = {
+        "title": f"skhmmgmr select: {path.name}",
+        "command": "select",
+        "text": [
+            f"skhmmgmr select on {path}: the parameter selection framework on the user's "
+            f"recordings, target '{args.target}', split by {rule}."
+        ],
+        "details": {
+            "data": str(path),
+            "recordings (train/validation/test)": "/".join(
+                str(counts.get(s, 0)) for s in ("train", "validation", "test")
+            ),
+            "split": rule,
+        },
+    }
+    return _run_framework(args, data, meta)
+
+
+def command_report(args):
+    from ._report import render_html
+
+    try:
+        page = render_html(args.result_dir)
+    except (FileNotFoundError, ValueError, KeyError) as exc:
+        raise CommandError(str(exc)) from exc
+    _log(args, f"Wrote {page}")
     return 0
 
 
@@ -161,26 +350,89 @@ def _add_data_options(parser):
     parser.add_argument("--time", default=TIME, help="time column (default: %(default)s)")
 
 
+def _add_framework_options(parser, *, n_top=None, k_max=None, trade_off_step=None):
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    parser.add_argument(
+        "--n-jobs", type=int, default=-1, help="parallel fits, joblib (default: all cores)"
+    )
+    parser.add_argument(
+        "--output", default="skhmmgmr_report", help="report folder (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--trade-off", default="50/50", help="accuracy/smoothness weights of every choice"
+    )
+    parser.add_argument("--n-top", type=int, default=n_top, help="features kept by the filter")
+    parser.add_argument("--k-max", type=int, default=k_max, help="largest number of states")
+    parser.add_argument(
+        "--trade-off-step", type=int, default=trade_off_step, help="relevance trade-off step [%%]"
+    )
+
+
 def build_parser():
     parser = argparse.ArgumentParser(
         prog="skhmmgmr", description="HMM-GMR driver steering-torque models."
     )
     parser.add_argument("--quiet", action="store_true", help="print results only")
     sub = parser.add_subparsers(dest="command", required=True)
+    quiet = argparse.ArgumentParser(add_help=False)
+    # SUPPRESS keeps a --quiet given before the sub-command
+    quiet.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS)
 
-    demo = sub.add_parser("demo", help="run the main job on the embedded simulator")
-    demo.add_argument("--full", action="store_true", help="thesis scale: 5-minute sections")
-    demo.add_argument("--duration", type=float, default=60.0, help="section length [s]")
-    demo.add_argument(
-        "--drivers", nargs="+", default=["defensive", "aggressive", "novice"], help="styles"
+    demo = sub.add_parser(
+        "demo",
+        parents=[quiet],
+        help="run the whole framework on simulated drivers and write a report",
+        description="Simulate the thesis' protocol for several virtual drivers, select the "
+        "features and K, compare the final model with the all-feature baseline on the test "
+        "sections, and write an HTML report with its tables and figures.",
     )
-    demo.add_argument("--n-states", type=int, default=5)
-    demo.add_argument("--seed", type=int, default=0)
-    demo.add_argument("--n-jobs", type=int, default=None)
-    demo.add_argument("--output", default="skhmmgmr_report", help="report folder")
+    demo.add_argument(
+        "--full", action="store_true", help="thesis scale: 5-minute sections, top 10, K<=20"
+    )
+    demo.add_argument(
+        "--drivers",
+        nargs="+",
+        default=["defensive", "aggressive", "novice"],
+        help="driver styles (default: %(default)s)",
+    )
+    demo.add_argument(
+        "--duration", type=float, help="section length [s] (default: 20; --full: 300)"
+    )
+    demo.add_argument(
+        "--sampling-rate", type=float, default=20.0, help="logging rate [Hz] (default: 20)"
+    )
+    demo.add_argument("--features", nargs="+", help="candidate features (default: all 18)")
+    _add_framework_options(demo)
     demo.set_defaults(handler=command_demo)
 
-    fit = sub.add_parser("fit", help="fit a model on CSV/Parquet recordings")
+    select = sub.add_parser(
+        "select",
+        parents=[quiet],
+        help="run the whole framework on your recordings and write a report",
+        description="Parameter selection on CSV/Parquet recordings (a file, or a folder with "
+        "one file per recording). Rows of a recording must be in time order. Recordings are "
+        "split by the --split column (values train, validation, test); without it they are "
+        "drawn at random by recording with --validation-fraction and --test-fraction.",
+    )
+    select.add_argument("data", help="CSV or Parquet file, or a folder of them")
+    _add_data_options(select)
+    select.add_argument("--split", default=SPLIT, help="split column (default: %(default)s)")
+    select.add_argument("--features", nargs="+", help="candidate features (default: all numeric)")
+    select.add_argument("--validation-fraction", type=float, default=0.25)
+    select.add_argument("--test-fraction", type=float, default=0.25)
+    _add_framework_options(select, n_top=10, k_max=10, trade_off_step=10)
+    select.set_defaults(handler=command_select)
+
+    report = sub.add_parser(
+        "report",
+        parents=[quiet],
+        help="re-render the HTML page of a report folder from its saved tables",
+        description="Rebuild index.html from manifest.json, the CSV tables and the PNG figures.",
+    )
+    report.add_argument("result_dir", help="folder written by 'skhmmgmr demo' or 'select'")
+    report.set_defaults(handler=command_report)
+
+    fit = sub.add_parser("fit", parents=[quiet], help="fit a model on CSV/Parquet recordings")
     fit.add_argument("data", help="CSV or Parquet file, one row per sample")
     _add_data_options(fit)
     fit.add_argument("--features", nargs="+", help="feature columns (default: all numeric)")
@@ -190,7 +442,9 @@ def build_parser():
     fit.add_argument("--output", default="model.joblib", help="model file to write")
     fit.set_defaults(handler=command_fit)
 
-    predict = sub.add_parser("predict", help="write estimate, std and state probabilities")
+    predict = sub.add_parser(
+        "predict", parents=[quiet], help="write estimate, std and state probabilities"
+    )
     predict.add_argument("model", help="model file written by 'skhmmgmr fit'")
     predict.add_argument("data", help="CSV or Parquet file")
     _add_data_options(predict)

@@ -1,0 +1,261 @@
+"""The report folder of ``skhmmgmr demo | select``: tables, figures, manifest and HTML page.
+
+The folder holds every table as CSV, every figure as PNG, a ``manifest.json`` describing them
+(captions, what was run, seeds, timings, versions) and ``index.html``, a self-contained page
+(figures embedded as base64 PNG). :func:`render_html` rebuilds the page from the folder alone,
+which is what ``skhmmgmr report DIR`` runs.
+"""
+
+import base64
+import html
+import json
+import platform
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+MANIFEST = "manifest.json"
+PAGE = "index.html"
+MAX_ROWS = 25
+
+# name -> (caption, shown on the page); every table is saved, long ones are shown truncated
+TABLES = {
+    "test_summary": ("Test set: final model against the all-feature baseline (means)", True),
+    "per_driver": ("Test set per driver (means over the driver's test recordings)", True),
+    "candidates": ("Candidate subsets (Strict/Mild/Liberal 1-3) on validation, K=2", True),
+    "state_choices": ("Number of states chosen by both 1% rules, per trade-off", True),
+    "filter": ("Spearman filter on the training recordings", True),
+    "relevance": ("Feature relevance: counts in the per-recording best subsets", True),
+    "anova": ("One-way ANOVAs", True),
+    "bic": ("BIC of every K on the training recordings", True),
+    "states": ("State selection: every K on every validation recording", False),
+    "test": ("Test set: every recording", True),
+    "candidate_scores": ("Candidate subsets: every validation recording", False),
+    "forward_paths": ("Forward selection: every step of every path", False),
+    "exhaustive": ("Exhaustive wrapper: every subset on every validation recording", False),
+}
+
+FIGURES = {
+    "estimate": "Estimated against measured torque on a test recording, +-2 std band and "
+    "filtered state probabilities (thesis Fig. C.2)",
+    "relevance": "Feature relevance over the accuracy/smoothness trade-offs (thesis Fig. 4)",
+    "state_selection": "State selection: mean validation metrics against K, chosen K dashed "
+    "(thesis Fig. 8)",
+    "drivers": "Final model against the baseline per driver on the test set (thesis Fig. 9)",
+}
+
+STYLE = """
+body { font-family: sans-serif; max-width: 1100px; margin: 2em auto; color: #222; }
+table { border-collapse: collapse; font-size: 0.85em; margin: 0.5em 0 1.5em; }
+th, td { border: 1px solid #ccc; padding: 2px 6px; text-align: right; }
+th { background: #f0f0f0; }
+img { max-width: 100%; }
+.meta td { text-align: left; }
+figure { margin: 1em 0 2em; }
+"""
+
+
+def versions():
+    """Versions of the packages the report depends on."""
+    import hmmlearn
+    import scipy
+    import sklearn
+
+    from . import __version__
+
+    found = {
+        "skhmmgmr": __version__,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "scikit-learn": sklearn.__version__,
+        "pandas": pd.__version__,
+        "hmmlearn": hmmlearn.__version__,
+    }
+    try:
+        import matplotlib
+
+        found["matplotlib"] = matplotlib.__version__
+    except ImportError:
+        found["matplotlib"] = "not installed"
+    return found
+
+
+def report_tables(report, per_driver):
+    """The tables of a :class:`~skhmmgmr.selection.SelectionReport` as flat DataFrames."""
+    tables = {name: getattr(report, name) for name in TABLES if hasattr(report, name)}
+    tables["relevance"] = report.relevance.reset_index()
+    tables["per_driver"] = per_driver
+    return tables
+
+
+def report_figures(report, data, *, sampling_period):
+    """The report's figures: estimate, relevance, state selection and per-driver bars.
+
+    Returns a dict name -> matplotlib figure, empty (with a warning) without matplotlib.
+    """
+    try:
+        from . import plotting
+
+        plotting._pyplot()
+    except ImportError as exc:
+        warnings.warn(f"no figures: {exc}", stacklevel=2)
+        return {}
+    figures = {}
+    test = data[data["split"] == "test"]
+    first = test["recording"].iloc[0]
+    rows = test[test["recording"] == first]
+    X = rows[list(report.features)].to_numpy(dtype=float)
+    model = report.final_model
+    estimate, std = model.predict(X, return_std=True)
+    time = rows["time"].to_numpy() if "time" in rows else np.arange(len(rows)) * sampling_period
+    figures["estimate"], _ = plotting.plot_estimate(
+        time,
+        rows["driver_torque"].to_numpy(),
+        estimate,
+        std=std,
+        state_proba=model.predict_state_proba(X),
+        title=f"final model ({len(report.features)} features, K={report.n_states}): {first}",
+        figsize=(8, 4.5),
+    )
+    figures["relevance"], _ = plotting.plot_relevance(report.relevance, source="combined")
+    figures["state_selection"], _ = plotting.plot_state_selection(
+        report.states, bic=report.bic, n_states=report.n_states
+    )
+    n_features = report.test_summary.set_index("model")["n_features"]
+    figures["drivers"], _ = plotting.plot_driver_comparison(
+        report.test,
+        drivers=dict(zip(data["recording"], data["driver"], strict=False)),
+        labels={m: f"{m} ({n} features)" for m, n in n_features.items()},
+    )
+    return figures
+
+
+def _cell(value):
+    if isinstance(value, tuple):
+        return ", ".join(map(str, value))
+    return value
+
+
+def write_report(output, *, tables, figures, meta):
+    """Write tables (CSV), figures (PNG), the manifest and the HTML page into ``output``.
+
+    Parameters
+    ----------
+    output : str or path
+        Folder, created if needed.
+    tables : dict of str to DataFrame
+    figures : dict of str to matplotlib.figure.Figure
+        Saved at 110 dpi and closed.
+    meta : dict
+        JSON-serialisable; keys ``title``, ``text`` (list of paragraphs) and ``details``
+        (label -> value, shown as a table) are rendered, the rest is kept in the manifest.
+
+    Returns
+    -------
+    page : pathlib.Path
+        The HTML page.
+    """
+    output = Path(output)
+    output.mkdir(parents=True, exist_ok=True)
+    manifest = {**meta, "tables": [], "figures": []}
+    for name, table in tables.items():
+        file = f"{name}.csv"
+        table.map(_cell).to_csv(output / file, index=False)
+        caption, shown = TABLES.get(name, (name, True))
+        manifest["tables"].append({"name": name, "file": file, "caption": caption, "shown": shown})
+    for name, fig in figures.items():
+        file = f"{name}.png"
+        fig.savefig(output / file, dpi=110)
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+        manifest["figures"].append({"name": name, "file": file, "caption": FIGURES.get(name, "")})
+    (output / MANIFEST).write_text(json.dumps(manifest, indent=2, default=str))
+    return render_html(output)
+
+
+def _table_html(table, file):
+    note = ""
+    if len(table) > MAX_ROWS:
+        note = f"<p>First {MAX_ROWS} of {len(table)} rows; all in <code>{file}</code>.</p>"
+        table = table.head(MAX_ROWS)
+    body = table.to_html(index=False, float_format=lambda v: f"{v:.4g}", na_rep="", border=0)
+    return body + note
+
+
+def render_html(output):
+    """(Re)build ``index.html`` of a report folder from its manifest, CSV tables and PNGs.
+
+    Parameters
+    ----------
+    output : str or path
+        A folder written by :func:`write_report`.
+
+    Returns
+    -------
+    page : pathlib.Path
+
+    Raises
+    ------
+    FileNotFoundError
+        When the folder has no manifest or a listed file is missing.
+    """
+    output = Path(output)
+    path = output / MANIFEST
+    if not path.is_file():
+        raise FileNotFoundError(f"{output} holds no {MANIFEST}: not a skhmmgmr report folder")
+    manifest = json.loads(path.read_text())
+    title = html.escape(manifest.get("title", "skhmmgmr report"))
+    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{title}</title>"]
+    parts.append(f"<style>{STYLE}</style></head><body><h1>{title}</h1>")
+    parts += [f"<p>{html.escape(p)}</p>" for p in manifest.get("text", [])]
+    details = manifest.get("details", {})
+    if details:
+        rows = "".join(
+            f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(v))}</td></tr>"
+            for k, v in details.items()
+        )
+        parts.append(f"<h2>Run</h2><table class='meta'>{rows}</table>")
+    tables = {t["name"]: t for t in manifest["tables"]}
+    for name in ("test_summary", "per_driver"):
+        if name in tables:
+            parts.append(_section(output, tables.pop(name), level=2))
+    if manifest["figures"]:
+        parts.append("<h2>Figures</h2>")
+    for figure in manifest["figures"]:
+        file = output / figure["file"]
+        if not file.is_file():
+            raise FileNotFoundError(f"{file} is listed in {MANIFEST} but missing")
+        data = base64.b64encode(file.read_bytes()).decode("ascii")
+        parts.append(
+            f"<figure><img alt='{html.escape(figure['name'])}' "
+            f"src='data:image/png;base64,{data}'>"
+            f"<figcaption>{html.escape(figure['caption'])}</figcaption></figure>"
+        )
+    parts.append("<h2>Tables</h2>")
+    parts += [_section(output, table, level=3) for table in tables.values() if table["shown"]]
+    hidden = [t["file"] for t in tables.values() if not t["shown"]]
+    if hidden:
+        parts.append(f"<p>Also saved: {', '.join(f'<code>{f}</code>' for f in hidden)}.</p>")
+    versions_found = manifest.get("versions", {})
+    if versions_found:
+        text = ", ".join(f"{k} {v}" for k, v in versions_found.items())
+        parts.append(f"<h2>Versions</h2><p>{html.escape(text)}</p>")
+    parts.append("</body></html>")
+    page = output / PAGE
+    page.write_text("\n".join(parts), encoding="utf-8")
+    return page
+
+
+def _section(output, entry, *, level):
+    file = output / entry["file"]
+    if not file.is_file():
+        raise FileNotFoundError(f"{file} is listed in {MANIFEST} but missing")
+    table = pd.read_csv(file)
+    caption = html.escape(entry["caption"])
+    return f"<h{level} id='{entry['name']}'>{caption}</h{level}>" + _table_html(
+        table, entry["file"]
+    )

@@ -1,0 +1,162 @@
+"""The command line, run in-process: demo/select reports, report re-render, fit/predict, errors."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from skhmmgmr.cli import build_parser, main
+
+pytest.importorskip("matplotlib")
+
+TINY = ["--duration", "6", "--sampling-rate", "10", "--n-top", "2", "--k-max", "2"]
+TINY += ["--trade-off-step", "50", "--n-jobs", "1", "--quiet"]
+FEATURES = ["steering_wheel_angle", "yaw_rate", "lateral_acceleration"]
+
+
+def make_recordings(n_recordings=6, length=80, seed=0, split=True):
+    """A tidy CSV-like table: the torque follows f0 and f1."""
+    rng = np.random.default_rng(seed)
+    frames = []
+    for r in range(n_recordings):
+        x = np.cumsum(rng.normal(scale=0.2, size=(length, 3)), axis=0)
+        frame = pd.DataFrame(x, columns=["f0", "f1", "f2"])
+        frame.insert(0, "run", f"r{r}")
+        frame.insert(1, "t", np.arange(length) * 0.05)
+        frame["torque"] = np.tanh(x[:, 0]) + 0.5 * x[:, 1] + rng.normal(scale=0.05, size=length)
+        if split:
+            frame["split"] = ["train", "train", "train", "train", "validation", "test"][r % 6]
+        frames.append(frame)
+    return pd.concat(frames, ignore_index=True)
+
+
+@pytest.fixture(scope="module")
+def demo_dir(tmp_path_factory):
+    output = tmp_path_factory.mktemp("demo") / "report"
+    argv = ["demo", "--drivers", "defensive", "novice", "--features", *FEATURES]
+    assert main([*argv, *TINY, "--output", str(output)]) == 0
+    return output
+
+
+def test_demo_writes_report(demo_dir, capsys):
+    names = {p.name for p in demo_dir.iterdir()}
+    for figure in ("estimate", "relevance", "state_selection", "drivers"):
+        assert f"{figure}.png" in names
+        assert (demo_dir / f"{figure}.png").stat().st_size > 5_000
+    for table in ("test_summary", "per_driver", "candidates", "relevance", "states", "bic"):
+        assert f"{table}.csv" in names
+    manifest = json.loads((demo_dir / "manifest.json").read_text())
+    assert manifest["command"] == "demo"
+    assert {"skhmmgmr", "scikit-learn", "numpy"} <= set(manifest["versions"])
+    assert manifest["details"]["seed"] == 0
+    assert "simulation" in manifest["timings"]
+    page = (demo_dir / "index.html").read_text()
+    assert page.count("data:image/png;base64,") == 4
+    assert page.count("<table") >= 8
+    assert "Test set per driver" in page and "defensive" in page and "novice" in page
+    per_driver = pd.read_csv(demo_dir / "per_driver.csv")
+    assert set(per_driver["driver"]) == {"defensive", "novice"}
+    assert set(per_driver["model"]) == {"final", "baseline"}
+
+
+def test_report_rerenders_from_saved_tables(demo_dir, tmp_path):
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for path in demo_dir.iterdir():
+        if path.name != "index.html":
+            (copy / path.name).write_bytes(path.read_bytes())
+    assert main(["report", str(copy), "--quiet"]) == 0
+    page = (copy / "index.html").read_text()
+    assert page == (demo_dir / "index.html").read_text()
+
+
+def test_report_errors(tmp_path, capsys):
+    assert main(["report", str(tmp_path)]) == 2
+    assert "manifest.json" in capsys.readouterr().err
+
+
+def test_select_on_csv_without_split(tmp_path, capsys):
+    data = make_recordings(n_recordings=6, split=False)
+    path = tmp_path / "runs.csv"
+    data.to_csv(path, index=False)
+    output = tmp_path / "out"
+    argv = ["select", str(path), "--target", "torque", "--recording", "run", "--time", "t"]
+    argv += ["--n-top", "2", "--k-max", "2", "--trade-off-step", "50", "--quiet"]
+    assert main([*argv, "--output", str(output)]) == 0
+    out = capsys.readouterr().out
+    assert "selected features" in out
+    manifest = json.loads((output / "manifest.json").read_text())
+    assert "drawn at random" in manifest["details"]["split"]
+    assert (
+        manifest["details"]["recordings (train/validation/test)"] == "3/2/1"
+        or sum(map(int, manifest["details"]["recordings (train/validation/test)"].split("/"))) == 6
+    )
+    assert (output / "index.html").is_file()
+
+
+def test_select_errors(tmp_path, capsys):
+    assert main(["select", str(tmp_path / "nope.csv")]) == 2
+    assert "not found" in capsys.readouterr().err
+    path = tmp_path / "runs.csv"
+    make_recordings().to_csv(path, index=False)
+    assert main(["select", str(path), "--target", "torque", "--recording", "run"]) == 2
+    assert "missing column(s) ['time']" in capsys.readouterr().err
+    bad = make_recordings().assign(split="holdout")
+    bad.to_csv(path, index=False)
+    argv = ["select", str(path), "--target", "torque", "--recording", "run", "--time", "t"]
+    assert main(argv) == 2
+    assert "'train', 'validation' and 'test'" in capsys.readouterr().err
+
+
+def test_fit_predict_round_trip(tmp_path):
+    data = make_recordings()
+    path = tmp_path / "runs.csv"
+    data.to_csv(path, index=False)
+    model = tmp_path / "model.joblib"
+    argv = ["fit", str(path), "--target", "torque", "--recording", "run", "--time", "t"]
+    assert main([*argv, "--features", "f0", "f1", "--n-states", "2", "--output", str(model)]) == 0
+    assert main(["--quiet", "predict", str(model), str(path), "--recording", "run"]) == 0
+    result = pd.read_csv(tmp_path / "runs_predicted.csv")
+    assert len(result) == len(data)
+    assert {"estimate", "estimate_std", "state_0", "state_1"} <= set(result.columns)
+    assert np.allclose(result[["state_0", "state_1"]].sum(axis=1), 1.0)
+    assert (result["estimate_std"] > 0).all()
+    assert np.corrcoef(result["estimate"], result["torque"])[0, 1] > 0.8
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["fit", "{tmp}/missing.csv"], "data file not found"),
+        (["fit", "{tmp}/garbage.parquet"], "cannot read"),
+        (["fit", "{tmp}/runs.csv", "--target", "nope", "--recording", "run"], "missing column"),
+        (["predict", "{tmp}/missing.joblib", "{tmp}/runs.csv"], "model file not found"),
+    ],
+)
+def test_error_exit_codes(tmp_path, capsys, argv, message):
+    make_recordings().to_csv(tmp_path / "runs.csv", index=False)
+    (tmp_path / "garbage.parquet").write_bytes(b"not parquet at all")
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_unknown_driver_style(capsys):
+    assert main(["demo", "--drivers", "reckless", "--quiet"]) == 2
+    assert "reckless" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["demo", "select", "report", "fit", "predict"])
+def test_help_of_every_sub_command(command, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main([command, "--help"])
+    assert exit_info.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"usage: skhmmgmr {command}")
+
+
+def test_parser_lists_sub_commands():
+    text = build_parser().format_help()
+    for command in ("demo", "select", "report", "fit", "predict"):
+        assert command in text
