@@ -36,8 +36,8 @@ SPEED = 100.0 / 3.6
 
 @pytest.fixture(scope="module")
 def corner_drive():
-    """One minute of sharp corners (setting 1), shared by the physics tests."""
-    return make_lane_keeping(60.0, setting=1, random_state=3)
+    """One minute of sharp corners (setting 1) in true states, shared by the physics tests."""
+    return make_lane_keeping(60.0, setting=1, random_state=3, sensor_noise=None)
 
 
 @pytest.fixture(scope="module")
@@ -221,6 +221,7 @@ def test_protocol_shape_and_ids():
         duration=2.0,
         sampling_rate=20.0,
         random_state=0,
+        sensor_noise=None,
     )
     recordings = frame.groupby("recording", sort=False)
     assert recordings.ngroups == 2 * (6 + 2 + 1)

@@ -9,6 +9,7 @@ from sklearn.utils import check_random_state
 
 from ._driver import DRIVER_STYLES
 from ._schema import FEATURE_UNITS, TARGET, TARGET_UNIT, TIME
+from ._sensors import check_sensor_noise
 from ._simulator import make_lane_keeping
 
 TRAIN_SETTINGS = (1, 2, 3, 4, 5, 6)
@@ -42,6 +43,7 @@ def make_driving_protocol(
     speed_kmh=100.0,
     scenario="highway",
     random_state=None,
+    sensor_noise="typical",
     n_jobs=None,
     cache=None,
 ):
@@ -72,6 +74,8 @@ def make_driving_protocol(
         Scenario of every section, see :func:`make_lane_keeping`.
     random_state : int, RandomState instance or None, default=None
         Seeds the roads and the recordings.
+    sensor_noise : {"typical", "none"}, float or None, default="typical"
+        Sensor errors of every recording, see :func:`make_lane_keeping` (Sensors).
     n_jobs : int, default=None
         Recordings simulated in parallel (joblib); None means 1.
     cache : str, path or joblib.Memory, default=None
@@ -104,6 +108,7 @@ def make_driving_protocol(
                 f"Unknown driver style {driver!r} in drivers; expected keys of DRIVER_STYLES "
                 f"{sorted(DRIVER_STYLES)}."
             )
+    check_sensor_noise(sensor_noise)
     if len(set(drivers)) != len(drivers):
         raise ValueError(f"drivers must not repeat a style, got drivers={drivers!r}.")
     sections = _sections(
@@ -133,6 +138,7 @@ def make_driving_protocol(
                 road_random_state=int(road_seeds[k]),
                 recording=f"{driver}-{split}-s{setting}-{i}",
                 split=split,
+                sensor_noise=sensor_noise,
                 cache=cache,
             )
             jobs.append(delayed(make_lane_keeping)(**kwargs))
@@ -142,5 +148,6 @@ def make_driving_protocol(
         "units": {TIME: "s", **FEATURE_UNITS, TARGET: TARGET_UNIT},
         "scenario": scenario,
         "speed": speed_kmh / 3.6,
+        "sensor_noise": check_sensor_noise(sensor_noise),
     }
     return frame

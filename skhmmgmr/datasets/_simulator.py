@@ -21,6 +21,7 @@ from ._schema import (
     TARGET_UNIT,
     TIME,
 )
+from ._sensors import check_sensor_noise, measure
 from ._vehicle import VehicleParameters
 
 SCENARIOS = ("highway", "sharp_corners", "lane_change", "evasive")
@@ -299,6 +300,7 @@ def _make_lane_keeping(
     road_random_state,
     recording,
     split,
+    sensor_noise=None,
 ):
     rng = check_random_state(random_state)
     road_rng = rng if road_random_state is None else check_random_state(road_random_state)
@@ -315,6 +317,9 @@ def _make_lane_keeping(
     offsets = manoeuvre_offsets(road, scenario, road_rng)
     log = _simulate(road, offsets, vehicle, parameters, speed, n_samples, n_sub, dt, rng)
     features, torque = _features(log, road, vehicle, speed)
+    # sensors: drawn after the closed loop, which therefore does not depend on sensor_noise
+    scale = check_sensor_noise(sensor_noise)
+    features, torque = measure(features, torque, 1.0 / sampling_rate, speed, scale, rng)
     if recording is None:
         recording = f"{style}-{scenario}-s{setting}"
     frame = pd.DataFrame(
@@ -331,6 +336,7 @@ def _make_lane_keeping(
     frame.attrs["units"] = {TIME: "s", **FEATURE_UNITS, TARGET: TARGET_UNIT}
     frame.attrs["scenario"] = scenario
     frame.attrs["speed"] = speed
+    frame.attrs["sensor_noise"] = scale
     return frame
 
 
@@ -346,6 +352,7 @@ def make_lane_keeping(
     road_random_state=None,
     recording=None,
     split="train",
+    sensor_noise="typical",
     cache=None,
 ):
     """Simulate a driver keeping the centre lane of a pseudo-random highway section.
@@ -385,6 +392,11 @@ def make_lane_keeping(
         Recording id; defaults to ``"{driver}-{scenario}-s{setting}"``.
     split : str, default="train"
         Value of the ``split`` column.
+    sensor_noise : {"typical", "none"}, float or None, default="typical"
+        Measurement of the logged signals (see Sensors below). "typical": realistic sensor
+        errors, derivatives computed from the measured signals, as a vehicle logs them. None or
+        "none": the true states of the simulation. A float scales every error (noise, drift,
+        resolution; "typical" is 1.0). The closed loop always runs on the true states.
     cache : str, path or joblib.Memory, default=None
         Cache the simulation on disk (only used when ``random_state`` is an int and
         ``road_random_state`` an int or None).
@@ -407,6 +419,40 @@ def make_lane_keeping(
     (0.41-0.47), max lateral deviation below 1.75 m (1.1-1.5; the vehicle centre never leaves
     the lane), RMS lateral acceleration 0.5-1.5 m/s^2 (0.97-1.0), RMS steering-wheel angle
     4-12 deg (6.9-7.1), max 10-40 deg (22.8-24.7). Use :func:`calibration_table` to compute them.
+    The bands hold for the true states and for the measured signals.
+
+    Sensors (``sensor_noise="typical"``). The driver sees the world, the logger measures it:
+    the sensor errors are drawn after the simulation and do not change the closed loop. Each
+    measured signal gets white noise (per sample, at the logging rate), a slowly varying error
+    (first-order Gauss-Markov: bias, attitude drift, camera tracking error) and a quantisation.
+    Magnitudes typical of the sensor type (RMS; 1 deg = 0.01745 rad):
+
+    ===============================  ======================  ==========  ===============  =========
+    signal                           sensor type             white       drift (time)     step
+    ===============================  ======================  ==========  ===============  =========
+    steering wheel angle             steering angle sensor   0.02 deg    -                0.1 deg
+    lateral velocity (slip angle)    GNSS/INS or optical     0.03 m/s    -                -
+    lateral acceleration             MEMS accelerometer      0.05 m/s^2  0.02 m/s^2 (60)  -
+    yaw rate                         MEMS gyro               0.1 deg/s   0.03 deg/s (60)  -
+    roll angle                       INS attitude            0.01 deg    0.05 deg (20 s)  -
+    lateral deviation 0 m            lane camera             0.01 m      0.03 m (0.2 s)   -
+    heading deviation 0 / 10 / 30 m  lane camera             3/4/6e-4    1/1.5/3e-3 rad   -
+                                                             rad         (0.2 s)
+    road curvature 0 / 10 / 30 m     lane camera             3/4/6e-5    1/1.5/3e-4 1/m   -
+                                                             1/m         (0.3 s)
+    driver torque (target)           EPS torque sensor       0.03 Nm     -                0.01 Nm
+    ===============================  ======================  ==========  ===============  =========
+
+    The slip angle is ``arctan(measured lateral velocity / speed)``. The derivatives are not
+    measured but computed as an ECU would, causally: backward difference of the measured signal
+    then a first-order low-pass of time constant 20 ms (steering-wheel velocity, from the angle)
+    or 40 ms (steering-wheel acceleration from the filtered velocity, yaw acceleration from the
+    yaw rate, roll velocity from the roll angle, roll acceleration from the filtered roll
+    velocity). At 100 Hz on a setting-7 section, the RMS error (noise and filter lag) is about
+    a quarter of the signal RMS for the steering-wheel velocity, half for the roll velocity,
+    equal for the yaw acceleration and 3 times for the roll acceleration; the steering-wheel
+    acceleration of the model has most of its power above the 4 Hz of the filter, so its
+    measured version keeps mainly the low-frequency part (correlation about 0.4).
 
     Examples
     --------
@@ -423,10 +469,11 @@ def make_lane_keeping(
     setting = _check_setting(setting)
     scenario = _check_scenario(scenario)
     check_driver(driver)
+    check_sensor_noise(sensor_noise)
     if int(round(duration * sampling_rate)) < 1:
         raise ValueError(f"duration={duration} s holds no sample at sampling_rate={sampling_rate}.")
     args = (duration, setting, driver, speed_kmh, sampling_rate, scenario, random_state)
-    args += (road_random_state, recording, split)
+    args += (road_random_state, recording, split, sensor_noise)
     seeded = isinstance(random_state, numbers.Integral) and (
         road_random_state is None or isinstance(road_random_state, numbers.Integral)
     )
