@@ -16,7 +16,13 @@ import numpy as np
 from hmmlearn import _hmmc
 from scipy import linalg
 
-from ._gaussian import compute_precision_cholesky, estimate_log_gaussian_prob
+from ._gaussian import (
+    chunk_size_for,
+    compute_precision_cholesky,
+    log_gaussian_prob_stacked,
+    shifted_transpose,
+    stack_gaussians,
+)
 
 
 @dataclass
@@ -62,14 +68,23 @@ def condition_on_inputs(startprob, transmat, means, covariances, n_inputs):
     )
 
 
-def filter_state_probabilities(X, recordings, params):
+def filter_state_probabilities(X, recordings, params, chunk_size=None):
     """Filtered state probabilities ``alpha_t,k`` given the inputs up to ``t``.
 
     The recursion restarts from the start probabilities at the first row of every recording.
+    The input densities are computed chunk by chunk (all states in one product per chunk).
     """
-    log_prob = estimate_log_gaussian_prob(X, params.input_means, params.input_precisions_chol)
-    log_prob -= log_prob.max(axis=1, keepdims=True)
-    frameprob = np.exp(log_prob)
+    n_samples = X.shape[0]
+    n_states, n_inputs = params.input_means.shape
+    stacked = stack_gaussians(params.input_means, params.input_precisions_chol)
+    step = chunk_size_for(n_states * n_inputs, chunk_size)
+    frameprob = np.empty((n_samples, n_states))
+    for start in range(0, n_samples, step):
+        rows = slice(start, start + step)
+        log_prob = log_gaussian_prob_stacked(shifted_transpose(X[rows]), *stacked)
+        log_prob -= log_prob.max(axis=0)
+        np.exp(log_prob, out=log_prob)
+        frameprob[rows] = log_prob.T
     alpha = np.empty_like(frameprob)
     for _, rows in recordings.slices():
         try:
@@ -102,15 +117,32 @@ def _forward_with_restarts(startprob, transmat, frameprob):
 
 def conditional_means(X, params):
     """Per-state conditional means ``m_t,k``, shape (n_samples, n_states, n_outputs)."""
-    return np.einsum("nf,kof->nko", X, params.coef) + params.intercept[np.newaxis]
+    n_states, n_outputs, n_inputs = params.coef.shape
+    # One product with all states' coefficients side by side, shape (n_inputs, K * n_outputs).
+    stacked = params.coef.reshape(n_states * n_outputs, n_inputs).T
+    state_means = X @ stacked
+    state_means += params.intercept.reshape(-1)
+    return state_means.reshape(X.shape[0], n_states, n_outputs)
+
+
+def _sum_over_states(alpha, values):
+    """``sum_k alpha[:, k] * values[:, k, :]`` as a product with ones (a vectorised reduction
+    over the short state axis)."""
+    n_samples, n_states, n_outputs = values.shape
+    ones = np.ones(n_states)
+    out = np.empty((n_samples, n_outputs))
+    for o in range(n_outputs):
+        np.matmul(alpha * values[:, :, o], ones, out=out[:, o])
+    return out
 
 
 def mix_estimates(alpha, state_means, params, return_std=False):
     """Mix per-state conditional means; optionally the law-of-total-variance std."""
-    estimate = np.einsum("nk,nko->no", alpha, state_means)
+    estimate = _sum_over_states(alpha, state_means)
     if not return_std:
         return estimate, None
     within = alpha @ np.diagonal(params.conditional_covariances, axis1=1, axis2=2)
     spread = state_means - estimate[:, np.newaxis, :]
-    between = np.einsum("nk,nko->no", alpha, spread * spread)
+    np.square(spread, out=spread)
+    between = _sum_over_states(alpha, spread)
     return estimate, np.sqrt(within + between)

@@ -192,7 +192,10 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         center = joint.mean(axis=0)
         scale = joint.std(axis=0)
         scale[scale <= 1e-12 * np.maximum(np.abs(center), 1.0)] = 1.0
-        standardized = (joint - center) / scale
+        # in place: joint is this method's own copy, and large fits should not hold two
+        standardized = joint
+        standardized -= center
+        standardized /= scale
         result = fit_hmm(
             standardized,
             recordings,

@@ -1,0 +1,192 @@
+"""The chunked EM and filter numerics against plain, unchunked references."""
+
+import numpy as np
+import pytest
+from scipy.special import logsumexp
+from scipy.stats import multivariate_normal
+
+from skhmmgmr._em import HMMParameters, _blocks, _Engine, e_step, initialize_parameters
+from skhmmgmr._gaussian import (
+    compute_precision_cholesky,
+    estimate_gaussian_covariances_full,
+    estimate_log_gaussian_prob,
+    gaussians_from_moments,
+    weighted_moments,
+)
+from skhmmgmr._gmr import (
+    condition_on_inputs,
+    conditional_means,
+    filter_state_probabilities,
+    mix_estimates,
+)
+from skhmmgmr._sequences import Recordings
+
+
+def random_gaussians(rng, n_states, n_features):
+    means = rng.normal(size=(n_states, n_features))
+    factors = rng.normal(size=(n_states, n_features, n_features))
+    covariances = factors @ factors.transpose(0, 2, 1) + np.eye(n_features)
+    return means, covariances
+
+
+def random_recordings(rng, lengths):
+    stops = np.cumsum(lengths)
+    return Recordings(ids=np.arange(len(lengths)), starts=stops - lengths, stops=stops)
+
+
+@pytest.mark.parametrize("chunk_size", [1, 7, 100, None])
+def test_log_prob_matches_scipy_for_any_chunk_size(chunk_size):
+    rng = np.random.default_rng(0)
+    means, covariances = random_gaussians(rng, 3, 4)
+    X = rng.normal(size=(257, 4)) * 2
+    log_prob = estimate_log_gaussian_prob(
+        X, means, compute_precision_cholesky(covariances), chunk_size=chunk_size
+    )
+    expected = np.column_stack(
+        [multivariate_normal(m, c).logpdf(X) for m, c in zip(means, covariances, strict=True)]
+    )
+    np.testing.assert_allclose(log_prob, expected, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("chunk_size", [1, 13, None])
+@pytest.mark.parametrize("shifted", [False, True])
+def test_weighted_moments_equal_unchunked_sums(chunk_size, shifted):
+    rng = np.random.default_rng(1)
+    X = rng.normal(size=(301, 5)) + 3.0
+    resp = rng.dirichlet(np.ones(4), size=301)
+    shift = X.mean(axis=0) if shifted else None
+    weights, first, second = weighted_moments(resp, X, shift, chunk_size=chunk_size)
+    Xs = X - (0 if shift is None else shift)
+    np.testing.assert_allclose(weights, resp.sum(axis=0), rtol=1e-12)
+    np.testing.assert_allclose(first, resp.T @ Xs, rtol=1e-12)
+    np.testing.assert_allclose(second, np.einsum("nk,ni,nj->kij", resp, Xs, Xs), rtol=1e-12)
+
+
+def test_gaussians_from_moments_match_centred_covariances():
+    rng = np.random.default_rng(2)
+    X = rng.normal(size=(500, 3)) @ rng.normal(size=(3, 3))
+    resp = rng.dirichlet(np.ones(3), size=500)
+    weights, first, second = weighted_moments(resp, X, X.mean(axis=0), chunk_size=64)
+    means, covariances = gaussians_from_moments(weights, first, second, 1e-3, X.mean(axis=0))
+    expected_means = (resp.T @ X) / weights[:, np.newaxis]
+    expected = estimate_gaussian_covariances_full(resp, X, weights, expected_means, 1e-3)
+    np.testing.assert_allclose(means, expected_means, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(covariances, expected, rtol=1e-11, atol=1e-14)
+    np.testing.assert_array_equal(covariances, covariances.transpose(0, 2, 1))
+
+
+def test_blocks_hold_whole_consecutive_recordings():
+    recordings = random_recordings(np.random.default_rng(0), np.array([3, 4, 10, 2, 2, 1]))
+    blocks = _blocks(recordings, max_rows=8)
+    assert [(b[0], b[1]) for b in blocks] == [(0, 7), (7, 17), (17, 22)]
+    assert blocks[0][2:] == ([0, 3], [3, 7])
+    assert blocks[2][2:] == ([0, 2, 4], [2, 4, 5])
+
+
+def reference_e_step(X, recordings, params):
+    """Log-space forward-backward per recording, one loop step per row."""
+    K = params.n_states
+    log_b = np.column_stack(
+        [
+            multivariate_normal(m, c).logpdf(X)
+            for m, c in zip(params.means, params.covariances, strict=True)
+        ]
+    )
+    log_a = np.log(params.transmat)
+    total, start, trans = 0.0, np.zeros(K), np.zeros((K, K))
+    resp = np.empty_like(log_b)
+    for _, rows in recordings.slices():
+        lb = log_b[rows]
+        T = len(lb)
+        fwd, bwd = np.empty((T, K)), np.zeros((T, K))
+        fwd[0] = np.log(params.startprob) + lb[0]
+        for t in range(1, T):
+            fwd[t] = logsumexp(fwd[t - 1][:, None] + log_a, axis=0) + lb[t]
+        for t in range(T - 2, -1, -1):
+            bwd[t] = logsumexp(log_a + lb[t + 1] + bwd[t + 1], axis=1)
+        log_p = logsumexp(fwd[-1])
+        total += log_p
+        resp[rows] = np.exp(fwd + bwd - log_p)
+        start += resp[rows][0]
+        for t in range(T - 1):
+            trans += np.exp(fwd[t][:, None] + log_a + lb[t + 1] + bwd[t + 1] - log_p)
+    return total, resp, start, trans
+
+
+@pytest.mark.parametrize(("chunk_size", "block_size"), [(None, None), (5, 5), (3, 40)])
+def test_e_step_matches_log_space_reference(chunk_size, block_size):
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(90, 3))
+    recordings = random_recordings(rng, np.array([30, 1, 17, 2, 40]))
+    means, covariances = random_gaussians(rng, 3, 3)
+    params = HMMParameters(
+        startprob=np.array([0.2, 0.5, 0.3]),
+        transmat=rng.dirichlet(np.ones(3) * 3, size=3),
+        means=means * 0.5,
+        covariances=covariances,
+    )
+    engine = _Engine(X, recordings, 3, chunk_size=chunk_size, block_size=block_size)
+    stats = e_step(engine, params)
+    total, resp, start, trans = reference_e_step(X, recordings, params)
+    Xs = X - stats.shift
+    assert stats.log_likelihood == pytest.approx(total, rel=1e-12)
+    np.testing.assert_allclose(stats.start_counts, start, rtol=1e-10)
+    np.testing.assert_allclose(stats.transition_counts, trans, rtol=1e-10)
+    np.testing.assert_allclose(stats.state_weights, resp.sum(axis=0), rtol=1e-10)
+    np.testing.assert_allclose(stats.first_moments, resp.T @ Xs, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(
+        stats.second_moments, np.einsum("nk,ni,nj->kij", resp, Xs, Xs), rtol=1e-9, atol=1e-12
+    )
+
+
+def test_e_step_statistics_do_not_depend_on_chunking():
+    rng = np.random.default_rng(4)
+    X = rng.normal(size=(5000, 4))
+    recordings = random_recordings(rng, np.array([1200, 3000, 800]))
+    params = initialize_parameters(
+        X, recordings, 4, "random_from_data", 1e-6, np.random.RandomState(0)
+    )
+    reference = e_step(_Engine(X, recordings, 4, chunk_size=10**6, block_size=10**6), params)
+    for chunk_size, block_size in [(64, 64), (1000, 2500), (None, None)]:
+        stats = e_step(_Engine(X, recordings, 4, chunk_size, block_size), params)
+        assert stats.log_likelihood == pytest.approx(reference.log_likelihood, rel=1e-13)
+        for name in ("transition_counts", "state_weights", "first_moments", "second_moments"):
+            np.testing.assert_allclose(
+                getattr(stats, name), getattr(reference, name), rtol=1e-11, atol=1e-10
+            )
+
+
+def test_kmeans_initialisation_is_reproducible_with_thread_limits():
+    rng = np.random.default_rng(5)
+    X = np.vstack([rng.normal(loc=c, size=(200, 2)) for c in (-4, 0, 4)])
+    recordings = random_recordings(rng, np.array([600]))
+    first = initialize_parameters(X, recordings, 3, "kmeans", 1e-6, np.random.RandomState(0))
+    second = initialize_parameters(X, recordings, 3, "kmeans", 1e-6, np.random.RandomState(0))
+    np.testing.assert_array_equal(first.means, second.means)
+    assert sorted(np.round(first.means[:, 0]).tolist()) == [-4.0, 0.0, 4.0]
+
+
+@pytest.mark.parametrize("n_outputs", [1, 2])
+def test_gmr_readout_matches_einsum_reference(n_outputs):
+    rng = np.random.default_rng(6)
+    n_inputs, K = 3, 4
+    means, covariances = random_gaussians(rng, K, n_inputs + n_outputs)
+    params = condition_on_inputs(
+        np.full(K, 1 / K), rng.dirichlet(np.ones(K), size=K), means, covariances, n_inputs
+    )
+    X = rng.normal(size=(211, n_inputs))
+    recordings = random_recordings(rng, np.array([100, 111]))
+    alpha = filter_state_probabilities(X, recordings, params)
+    np.testing.assert_allclose(
+        filter_state_probabilities(X, recordings, params, chunk_size=16), alpha, rtol=1e-13
+    )
+    state_means = conditional_means(X, params)
+    expected = np.einsum("nf,kof->nko", X, params.coef) + params.intercept
+    np.testing.assert_allclose(state_means, expected, rtol=1e-12, atol=1e-12)
+    estimate, std = mix_estimates(alpha, state_means, params, return_std=True)
+    expected_estimate = np.einsum("nk,nko->no", alpha, expected)
+    spread = expected - expected_estimate[:, None, :]
+    within = alpha @ np.diagonal(params.conditional_covariances, axis1=1, axis2=2)
+    expected_std = np.sqrt(within + np.einsum("nk,nko->no", alpha, spread**2))
+    np.testing.assert_allclose(estimate, expected_estimate, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(std, expected_std, rtol=1e-12)
