@@ -22,7 +22,7 @@ from skhmmgmr import select_parameters
 from skhmmgmr.datasets import DRIVER_STYLES, make_driving_protocol
 
 REDUCED = dict(n_train_per_setting=2, n_validation=6, n_test=6, duration=60.0, sampling_rate=20.0)
-FULL = dict(n_train_per_setting=2, n_validation=6, n_test=6, duration=300.0, sampling_rate=100.0)
+FULL = dict(n_train_per_setting=2, n_validation=6, n_test=6, duration=300.0, sampling_rate=20.0)
 SHORT = {
     "steering_wheel_angle": "swa",
     "steering_wheel_velocity": "swv",
