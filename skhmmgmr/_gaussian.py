@@ -26,35 +26,6 @@ class NotPositiveDefiniteError(ValueError):
     """A state covariance is not positive definite even after regularisation."""
 
 
-def estimate_gaussian_covariances_full(resp, X, state_weights, means, reg_covar):
-    """Weighted covariance of every state, with ``reg_covar`` added to its diagonal.
-
-    Parameters
-    ----------
-    resp : ndarray of shape (n_samples, n_states)
-        State posteriors (responsibilities) of every row.
-    X : ndarray of shape (n_samples, n_features)
-    state_weights : ndarray of shape (n_states,)
-        Column sums of ``resp`` (expected number of rows per state), strictly positive.
-    means : ndarray of shape (n_states, n_features)
-    reg_covar : float
-        Non-negative value added to every diagonal element.
-
-    Returns
-    -------
-    covariances : ndarray of shape (n_states, n_features, n_features)
-    """
-    n_states, n_features = means.shape
-    covariances = np.empty((n_states, n_features, n_features))
-    for k in range(n_states):
-        diff = X - means[k]
-        weighted = diff * resp[:, k, np.newaxis]
-        covariances[k] = (weighted.T @ diff) / state_weights[k]
-        covariances[k] = 0.5 * (covariances[k] + covariances[k].T)
-        covariances[k].flat[:: n_features + 1] += reg_covar
-    return covariances
-
-
 def compute_precision_cholesky(covariances):
     """Cholesky factors of the precision matrices of full covariances.
 
@@ -75,16 +46,6 @@ def compute_precision_cholesky(covariances):
             ) from exc
         precisions_chol[k] = linalg.solve_triangular(cov_chol, np.eye(n_features), lower=True).T
     return precisions_chol
-
-
-def covariances_from_precision_cholesky(precisions_chol):
-    """Inverse of :func:`compute_precision_cholesky`."""
-    covariances = np.empty_like(precisions_chol)
-    eye = np.eye(precisions_chol.shape[1])
-    for k, prec_chol in enumerate(precisions_chol):
-        inv = linalg.solve_triangular(prec_chol, eye, lower=False)
-        covariances[k] = inv @ inv.T
-    return covariances
 
 
 def log_det_cholesky(precisions_chol):
