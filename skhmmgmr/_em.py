@@ -1,37 +1,46 @@
 """Baum-Welch (EM) engine for a full-covariance Gaussian HMM over several recordings.
 
 The template follows ``sklearn.mixture``: initialise, E-step, M-step, log-likelihood,
-convergence test, ``n_init`` restarts keeping the best log-likelihood. The forward-backward
-recursions run per recording in hmmlearn's compiled kernels (scaled form). Everything else is
-done block by block: a block holds whole consecutive recordings of about one cache-sized chunk
-of rows; its emission densities (one BLAS product for all states), posteriors, expected
-transitions and weighted moments are computed while its rows are in cache, so an iteration
-reads the data once and holds no array of the size of the data.
+convergence test, ``n_init`` restarts keeping the best log-likelihood.
 
-The estimator talks to this module only through :func:`fit_hmm`, :func:`score_hmm` and
-:class:`HMMParameters`.
+The data are held once, as augmented columns (:class:`Columns`). The E-step works block by
+block, a block holding whole consecutive recordings of about one cache-sized chunk of rows:
+
+1. the emission log-densities of all states, one BLAS product per chunk
+   (:func:`~skhmmgmr._gaussian.log_gaussian_prob_stacked`), scaled to a maximum of one per row
+   and exponentiated by NumPy's vectorised ``exp``;
+2. the compiled forward and backward recursions (:mod:`skhmmgmr._kernels`), which also give
+   the posteriors and the terms of the expected transitions;
+3. the expected transitions as one product, and the weighted moments as one symmetric product
+   per state, while the block's rows are still in cache.
+
+An iteration reads the data once and holds no array of the size of the data besides the
+posteriors of one block. The moments of one state (the heaviest of the previous E-step) are
+those of all rows minus the others': every row's posteriors sum to one, so with K=2 only one
+state's products are computed.
+
+The estimator talks to this module only through :class:`Columns`, :func:`fit_hmm`,
+:func:`score_hmm` and :class:`HMMParameters`.
 """
 
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from hmmlearn import _hmmc
 from sklearn.cluster import KMeans, kmeans_plusplus
-from sklearn.metrics import pairwise_distances_argmin
 from sklearn.utils import check_random_state
 from threadpoolctl import threadpool_limits
 
 from ._gaussian import (
+    MomentSums,
     NotPositiveDefiniteError,
-    accumulate_moments,
+    augmented_columns,
     chunk_size_for,
     compute_precision_cholesky,
     gaussians_from_moments,
-    log_gaussian_prob_stacked,
-    shifted_transpose,
+    split_moments,
     stack_gaussians,
-    weighted_moments,
 )
+from ._kernels import backward_posteriors, forward, scaled_log_densities
 
 INIT_METHODS = ("kmeans", "k-means++", "random", "random_from_data")
 
@@ -43,8 +52,9 @@ MIN_STATE_WEIGHT = 1.0
 # Consecutive short recordings are grouped into blocks of about this many rows.
 BLOCK_ROWS = 8192
 
-# Blocks up to this many rows keep their shifted rows between the E-step's two passes.
-CACHED_BLOCK_ROWS = 1 << 16
+# The k-means initialisations cluster a random sample of at most this many rows; every row
+# then joins its nearest centre.
+INIT_SAMPLE_ROWS = 100_000
 
 # Below this many values (rows x columns) KMeans runs on one OpenMP thread.
 SMALL_KMEANS_SIZE = 1_000_000
@@ -91,11 +101,73 @@ class _Statistics:
     shift: np.ndarray
 
 
+@dataclass
+class Columns:
+    """The data as the engine reads them: the rows of ``X - shift`` as columns, plus ones.
+
+    Attributes
+    ----------
+    values : ndarray of shape (n_features + 1, n_samples)
+        C-contiguous; the last row is ones (see :func:`~skhmmgmr._gaussian.augmented_columns`).
+    shift : ndarray of shape (n_features,)
+        Point subtracted from every row; moments are taken about it, so it should be near the
+        data (the mean), where the raw second moments lose no significant digits.
+    """
+
+    values: np.ndarray
+    shift: np.ndarray
+
+    @classmethod
+    def from_rows(cls, X):
+        """Columns of ``X`` (n_samples, n_features) about its column means (a copy)."""
+        X = np.asarray(X, dtype=float)
+        shift = X.mean(axis=0) if X.shape[0] else np.zeros(X.shape[1])
+        return cls(augmented_columns(X, shift), shift)
+
+    @classmethod
+    def standardized(cls, *blocks):
+        """Columns of ``hstack(blocks)``, each column standardised, built without the stack.
+
+        Returns ``(columns, center, scale)``: the column means and standard deviations (a
+        constant column keeps scale 1). Only the columns are allocated at the size of the
+        data; the standardisation runs in place, one column at a time.
+        """
+        n_samples = blocks[0].shape[0]
+        n_features = sum(block.shape[1] for block in blocks)
+        values = np.empty((n_features + 1, n_samples))
+        row = 0
+        for block in blocks:
+            values[row : row + block.shape[1]] = block.T
+            row += block.shape[1]
+        values[n_features] = 1.0
+        center, scale = np.empty(n_features), np.empty(n_features)
+        for i in range(n_features):
+            column = values[i]
+            center[i] = column.mean()
+            column -= center[i]
+            spread = np.sqrt(np.dot(column, column) / n_samples)
+            scale[i] = spread if spread > 1e-12 * max(abs(center[i]), 1.0) else 1.0
+            column /= scale[i]
+        return cls(values, np.zeros(n_features)), center, scale
+
+    @property
+    def n_features(self):
+        return self.values.shape[0] - 1
+
+    @property
+    def n_samples(self):
+        return self.values.shape[1]
+
+    def rows(self, index=slice(None)):
+        """Rows ``index`` of ``X - shift``, shape (n_rows, n_features) (a copy)."""
+        return np.ascontiguousarray(self.values[: self.n_features, index].T)
+
+
 def _blocks(recordings, max_rows):
     """Group consecutive recordings into blocks of at most ``max_rows`` rows.
 
-    A recording longer than ``max_rows`` forms a block of its own. Yields ``(start, stop,
-    starts, stops)`` with the recording bounds relative to ``start``.
+    A recording longer than ``max_rows`` forms a block of its own. Returns ``(start, stop,
+    starts, stops)`` tuples with the recording bounds relative to ``start``.
     """
     starts, stops = np.asarray(recordings.starts), np.asarray(recordings.stops)
     blocks = []
@@ -119,96 +191,108 @@ def _blocks(recordings, max_rows):
 
 
 class _Engine:
-    """Per-fit constants: the data, its shift point, the recording blocks and chunk size."""
+    """Per-fit constants: the columns, the recording blocks, the chunk size, and the moments
+    of all rows."""
 
     def __init__(self, X, recordings, n_states, chunk_size=None, block_size=None):
-        self.X = X
+        self.data = X if isinstance(X, Columns) else Columns.from_rows(X)
+        self.shift = self.data.shift
         self.n_states = n_states
-        self.shift = X.mean(axis=0) if X.shape[0] else np.zeros(X.shape[1])
-        self.step = chunk_size_for(n_states * X.shape[1], chunk_size)
-        self.blocks = _blocks(recordings, block_size or max(self.step, BLOCK_ROWS))
+        self.step = chunk_size_for(n_states * self.data.n_features, chunk_size)
+        self.blocks = [
+            (start, stop, np.asarray(starts, dtype=np.int64), np.asarray(stops, dtype=np.int64))
+            for start, stop, starts, stops in _blocks(
+                recordings, block_size or max(self.step, BLOCK_ROWS)
+            )
+        ]
+        self._totals = None
+        # State whose moments the next E-step takes as the total minus the others'.
+        self.remainder = None
 
-    def chunks(self, start, stop):
-        """Shifted, transposed rows ``start:stop`` in chunks of about ``step`` rows.
-
-        A block of up to :data:`CACHED_BLOCK_ROWS` rows comes back as a list, so that the
-        E-step shifts its rows once for the emissions and the moments; longer blocks are
-        generated lazily, twice, so that memory stays bounded.
-        """
-        n_chunks = -(-(stop - start) // self.step)
+    def chunks(self, start=0, stop=None):
+        """``(lo, hi, columns[:, start + lo : start + hi])`` for chunks of rows ``start:stop``."""
+        values = self.data.values
+        stop = values.shape[1] if stop is None else stop
+        n_chunks = max(-(-(stop - start) // self.step), 1)
         bounds = np.linspace(0, stop - start, n_chunks + 1).astype(int).tolist()
-        chunks = (
-            (lo, hi, shifted_transpose(self.X[start + lo : start + hi], self.shift))
-            for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)
-        )
-        return list(chunks) if stop - start <= CACHED_BLOCK_ROWS else chunks
+        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+            yield lo, hi, values[:, start + lo : start + hi]
 
-    def frame_probabilities(self, stacked, n_rows, chunks):
-        """Emission likelihoods of a block scaled per row (max 1), and the summed log scale."""
-        frameprob = np.empty((n_rows, self.n_states))
-        log_scale = 0.0
-        for lo, hi, chunk in chunks:
-            log_prob = log_gaussian_prob_stacked(chunk, *stacked)
-            row_max = log_prob.max(axis=0)
-            log_prob -= row_max
-            np.exp(log_prob, out=log_prob)
-            frameprob[lo:hi] = log_prob.T
-            log_scale += row_max.sum()
-        return frameprob, log_scale
+    def frames(self, stacked, start, stop):
+        """Emission likelihoods of rows ``start:stop`` scaled to a maximum of one per row.
+
+        Returns ``(frames, log_scale)``: frames of shape (rows, n_states), C-contiguous, and
+        the sum over the rows of the logarithms of the scales.
+        """
+        factors, norms = stacked
+        frames = np.empty((stop - start, self.n_states))
+        top = np.empty(stop - start)
+        for lo, hi, chunk in self.chunks(start, stop):
+            scaled_log_densities(factors @ chunk, norms[:, 0], frames[lo:hi], top[lo:hi])
+        np.exp(frames, out=frames)
+        return frames, float(top.sum())
+
+    @property
+    def totals(self):
+        """Augmented moments of all rows (computed once)."""
+        if self._totals is None:
+            n_columns = self.data.values.shape[0]
+            sums = MomentSums(1, n_columns)
+            for lo, hi, chunk in self.chunks():
+                sums.add(np.ones((1, hi - lo)), chunk)
+            self._totals = sums.result()[0]
+        return self._totals
 
 
-def _forward(params, frames):
-    try:
-        return _hmmc.forward_scaling(params.startprob, params.transmat, frames)
-    except ValueError as exc:
-        raise FloatingPointError(
-            "the forward pass underflowed: a recording is impossible under the current "
-            "transition matrix"
-        ) from exc
+def _raise_impossible():
+    raise FloatingPointError(
+        "the forward pass underflowed: a recording is impossible under the current "
+        "transition matrix"
+    )
 
 
 def e_step(engine, params):
-    """Forward-backward over every recording, accumulating the sufficient statistics.
-
-    Emissions, posteriors and moments are computed block by block (whole recordings of about
-    one chunk of rows), so no array of the size of the data is held besides the data.
-    """
-    n_states, n_features = params.means.shape
+    """Forward-backward over every recording, accumulating the sufficient statistics."""
+    n_states = params.n_states
+    n_columns = engine.data.values.shape[0]
     stacked = stack_gaussians(params.means, params.precisions_chol, engine.shift)
+    remainder = engine.remainder
+    accumulated = [k for k in range(n_states) if k != remainder]
     start_counts = np.zeros(n_states)
-    xi_sum = np.zeros((n_states, n_states))
-    weights = np.zeros(n_states)
-    first = np.zeros((n_states, n_features))
-    second = np.zeros((n_states, n_features, n_features))
+    transition_sums = np.zeros((n_states, n_states))
+    sums = MomentSums(n_states, n_columns, states=accumulated)
     log_likelihood = 0.0
     for start, stop, rec_starts, rec_stops in engine.blocks:
-        chunks = engine.chunks(start, stop)
-        frameprob, log_scale = engine.frame_probabilities(stacked, stop - start, chunks)
-        log_likelihood += log_scale
-        fwd = np.empty_like(frameprob)
-        bwd = np.empty_like(frameprob)
-        for lo, hi in zip(rec_starts, rec_stops, strict=True):
-            frames = frameprob[lo:hi]
-            log_prob, fwd[lo:hi], scaling = _forward(params, frames)
-            bwd[lo:hi] = _hmmc.backward_scaling(params.startprob, params.transmat, frames, scaling)
-            log_likelihood += log_prob
-        # sum_t fwd[t, i] A[i, j] frameprob[t + 1, j] bwd[t + 1, j], without the terms that
-        # would cross from one recording into the next (A[i, j] is applied in the M-step).
-        forward_weight = frameprob
-        forward_weight *= bwd
-        forward_weight[rec_starts] = 0.0
-        xi_sum += fwd[:-1].T @ forward_weight[1:]
-        post = np.multiply(fwd.T, bwd.T, out=np.empty((n_states, stop - start)))
-        post /= post.sum(axis=0)
-        start_counts += post[:, rec_starts].sum(axis=1)
-        weights += post.sum(axis=1)
-        if not isinstance(chunks, list):
-            chunks = engine.chunks(start, stop)
-        for lo, hi, chunk in chunks:
-            accumulate_moments(post[:, lo:hi], chunk, first, second)
-    transition_counts = xi_sum * params.transmat
+        frames, log_scale = engine.frames(stacked, start, stop)
+        n_rows = stop - start
+        alpha, scale = np.empty_like(frames), np.empty(n_rows)
+        if not forward(
+            frames, rec_starts, rec_stops, params.startprob, params.transmat, alpha, scale
+        ):
+            _raise_impossible()
+        log_likelihood += log_scale + float(np.log(scale).sum())
+        posteriors, weighted = np.empty((n_states, n_rows)), np.empty_like(frames)
+        backward_posteriors(
+            frames, rec_starts, rec_stops, params.transmat, alpha, scale, posteriors, weighted
+        )
+        # weighted is zero at every recording's first row: no term crosses recordings.
+        transition_sums += alpha[:-1].T @ weighted[1:]
+        start_counts += posteriors[:, rec_starts].sum(axis=1)
+        for lo, hi, chunk in engine.chunks(start, stop):
+            sums.add(posteriors[:, lo:hi], chunk)
+    moments = sums.result()
+    if remainder is not None:
+        moments[remainder] = engine.totals - moments[accumulated].sum(axis=0)
+    weights, first, second = split_moments(moments)
+    engine.remainder = int(np.argmax(weights))
     return _Statistics(
-        log_likelihood, start_counts, transition_counts, weights, first, second, engine.shift
+        log_likelihood,
+        start_counts,
+        transition_sums * params.transmat,
+        weights.copy(),
+        first.copy(),
+        second.copy(),
+        engine.shift,
     )
 
 
@@ -221,11 +305,13 @@ def _score(engine, params):
     stacked = stack_gaussians(params.means, params.precisions_chol, engine.shift)
     log_likelihood = 0.0
     for start, stop, rec_starts, rec_stops in engine.blocks:
-        chunks = engine.chunks(start, stop)
-        frameprob, log_scale = engine.frame_probabilities(stacked, stop - start, chunks)
-        log_likelihood += log_scale
-        for lo, hi in zip(rec_starts, rec_stops, strict=True):
-            log_likelihood += _forward(params, frameprob[lo:hi])[0]
+        frames, log_scale = engine.frames(stacked, start, stop)
+        alpha, scale = np.empty_like(frames), np.empty(stop - start)
+        if not forward(
+            frames, rec_starts, rec_stops, params.startprob, params.transmat, alpha, scale
+        ):
+            _raise_impossible()
+        log_likelihood += log_scale + float(np.log(scale).sum())
     return float(log_likelihood)
 
 
@@ -248,61 +334,84 @@ def m_step(stats, previous, reg_covar):
     return HMMParameters(startprob, transmat, means, covariances)
 
 
-def _kmeans_labels(X, n_states, random_state):
+def _init_sample(data, random_state):
+    """The rows (about the shift) that the k-means initialisations cluster: all, or a sample."""
+    if data.n_samples <= INIT_SAMPLE_ROWS:
+        return data.rows()
+    rows = np.sort(random_state.choice(data.n_samples, size=INIT_SAMPLE_ROWS, replace=False))
+    return data.rows(rows)
+
+
+def _kmeans_centers(sample, n_states, random_state):
     # On small data the OpenMP thread start-up of KMeans costs far more than the clustering
     # (tens of milliseconds on a busy machine); one thread is faster there.
-    threads = 1 if X.size < SMALL_KMEANS_SIZE else None
+    threads = 1 if sample.size < SMALL_KMEANS_SIZE else None
     with threadpool_limits(limits=threads, user_api="openmp"):
         kmeans = KMeans(n_clusters=n_states, n_init=1, random_state=random_state)
-        return kmeans.fit(X).labels_
+        return kmeans.fit(sample).cluster_centers_
 
 
-def _hard_moments(engine, labels, n_states):
-    """Weights and moments of a hard assignment, chunk by chunk."""
-    n_features = engine.X.shape[1]
-    first = np.zeros((n_states, n_features))
-    second = np.zeros((n_states, n_features, n_features))
-    for lo, hi, chunk in engine.chunks(0, engine.X.shape[0]):
+def _initial_moments(engine, n_states, responsibilities):
+    """Augmented moments of the responsibilities ``responsibilities(lo, hi, chunk)`` returns
+    for every chunk of rows, state-major."""
+    sums = MomentSums(n_states, engine.data.values.shape[0])
+    for lo, hi, chunk in engine.chunks():
+        sums.add(responsibilities(lo, hi, chunk), chunk)
+    return split_moments(sums.result())
+
+
+def _nearest_centre(centers):
+    """Hard responsibilities: every row to its nearest centre (centres about the shift)."""
+    n_states = centers.shape[0]
+    half_norms = 0.5 * np.einsum("kf,kf->k", centers, centers)[:, np.newaxis]
+
+    def responsibilities(lo, hi, chunk):
+        # argmin_k ||x - c_k||^2 = argmin_k (||c_k||^2 / 2 - c_k . x)
+        labels = np.argmin(half_norms - centers @ chunk[:-1], axis=0)
         respT = np.zeros((n_states, hi - lo))
-        respT[labels[lo:hi], np.arange(hi - lo)] = 1.0
-        accumulate_moments(respT, chunk, first, second)
-    weights = np.bincount(labels, minlength=n_states).astype(float)
-    return weights, first, second
+        respT[labels, np.arange(hi - lo)] = 1.0
+        return respT
+
+    return responsibilities
 
 
 def initialize_parameters(
     X, recordings, n_states, init_params, reg_covar, random_state, engine=None
 ):
-    """Initial parameters: emissions from a hard clustering, random transitions."""
-    n_samples, n_features = X.shape
+    """Initial parameters, in the manner of ``sklearn.mixture``'s ``init_params``."""
     if engine is None:
         engine = _Engine(X, recordings, n_states)
+    data = engine.data
+    n_samples, n_features = data.n_samples, data.n_features
     if init_params == "random":
         resp = random_state.uniform(size=(n_samples, n_states))
         resp /= resp.sum(axis=1, keepdims=True)
-        state_weights, first, second = weighted_moments(resp, X, engine.shift, engine.step)
+        state_weights, first, second = _initial_moments(
+            engine, n_states, lambda lo, hi, chunk: np.ascontiguousarray(resp[lo:hi].T)
+        )
     else:
+        sample = _init_sample(data, random_state)
         if init_params == "kmeans":
-            labels = _kmeans_labels(X, n_states, random_state)
+            centers = _kmeans_centers(sample, n_states, random_state)
+        elif init_params == "k-means++":
+            centers, _ = kmeans_plusplus(sample, n_states, random_state=random_state)
         else:
-            if init_params == "k-means++":
-                centers, _ = kmeans_plusplus(X, n_states, random_state=random_state)
-            else:
-                centers = X[random_state.choice(n_samples, size=n_states, replace=False)]
-            labels = pairwise_distances_argmin(X, centers)
-        state_weights, first, second = _hard_moments(engine, labels, n_states)
+            centers = sample[random_state.choice(len(sample), size=n_states, replace=False)]
+        state_weights, first, second = _initial_moments(engine, n_states, _nearest_centre(centers))
     safe_weights = np.maximum(state_weights, 1e-12)
     means, covariances = gaussians_from_moments(
         safe_weights, first, second, reg_covar, engine.shift
     )
-    # A cluster with fewer rows than dimensions has a singular scatter: give it the pooled
+    # A state with too few rows for a full covariance (or none at all) takes the pooled
     # covariance instead, so that EM starts from usable Gaussians.
     small = state_weights < n_features + 1
     if np.any(small):
-        pooled = np.cov(X, rowvar=False).reshape(n_features, n_features)
-        pooled.flat[:: n_features + 1] += reg_covar
-        covariances[small] = pooled
-        means[small & (state_weights < 1e-12)] = X.mean(axis=0)
+        total_weight, total_first, total_second = split_moments(engine.totals[np.newaxis])
+        pooled_mean, pooled = gaussians_from_moments(
+            total_weight, total_first, total_second, reg_covar, engine.shift
+        )
+        covariances[small] = pooled[0]
+        means[small & (state_weights < 1e-12)] = pooled_mean[0]
     startprob = np.full(n_states, 1.0 / n_states)
     transmat = random_state.dirichlet(np.ones(n_states), size=n_states)
     return HMMParameters(startprob, transmat, means, covariances)
@@ -316,7 +425,8 @@ def baum_welch(X, recordings, params, *, n_iter, tol, reg_covar, callback=None, 
     """
     if engine is None:
         engine = _Engine(X, recordings, params.n_states)
-    n_samples = X.shape[0]
+    engine.remainder = None
+    n_samples = engine.data.n_samples
     history = []
     converged = False
     n_done = 0
@@ -349,8 +459,9 @@ def fit_hmm(
 ):
     """Fit a Gaussian HMM with ``n_init`` restarts and return the best :class:`EMResult`.
 
-    When ``converged`` is reached the last E-step already scored the returned parameters
-    (they were not updated after it); otherwise the returned parameters are scored once more.
+    ``X`` is an array of shape (n_samples, n_features) or :class:`Columns`. When
+    ``converged`` is reached the last E-step already scored the returned parameters (they
+    were not updated after it); otherwise the returned parameters are scored once more.
     """
     random_state = check_random_state(random_state)
     engine = _Engine(X, recordings, n_states)
@@ -360,11 +471,17 @@ def fit_hmm(
             params = replace(initial_parameters)
         else:
             params = initialize_parameters(
-                X, recordings, n_states, init_params, reg_covar, random_state, engine=engine
+                None, recordings, n_states, init_params, reg_covar, random_state, engine=engine
             )
         try:
             result = baum_welch(
-                X, recordings, params, n_iter=n_iter, tol=tol, reg_covar=reg_covar, engine=engine
+                None,
+                recordings,
+                params,
+                n_iter=n_iter,
+                tol=tol,
+                reg_covar=reg_covar,
+                engine=engine,
             )
         except NotPositiveDefiniteError as exc:
             raise ValueError(

@@ -3,17 +3,20 @@
 Every function works on Cholesky factors of the precision matrices, as
 ``sklearn.mixture`` does: for a covariance ``S = L L^T`` (``L`` lower triangular) the precision
 Cholesky factor is ``P = L^{-T}`` (upper triangular), so that ``S^{-1} = P P^T`` and the Mahalanobis
-distance of ``x`` is ``||(x - mu) @ P||^2``. One matrix product per state gives the log-densities
-of all rows.
+distance of ``x`` is ``||(x - mu) @ P||^2``.
 
-For long arrays the products are done in chunks of rows (:data:`CHUNK_SIZE`), with the
-factors of all states stacked side by side: one product per chunk instead of one pass over all
-rows per state keeps the work in cache. The weighted moments of the M-step are accumulated in
-the same chunks, about a fixed shift point, without per-state centred copies of the data.
+The data are handled as *augmented columns*: the rows of ``X - shift`` as the columns of a
+C-contiguous ``(n_features + 1, n_rows)`` array whose last row is ones. One product of the
+stacked factors of all states (offsets in the last column) with a chunk of columns gives the
+Mahalanobis terms of every state; one symmetric product per state gives its weight, first and
+second moments about the shift point. Chunks of :data:`CHUNK_SIZE` rows keep each product's
+output in cache while it is reduced.
 """
 
 import numpy as np
 from scipy import linalg
+
+from ._kernels import pairwise_products
 
 LOG_2PI = np.log(2.0 * np.pi)
 
@@ -69,52 +72,56 @@ def stack_gaussians(means, precisions_chol, shift=None):
     means : ndarray of shape (n_states, n_features)
     precisions_chol : ndarray of shape (n_states, n_features, n_features)
     shift : ndarray of shape (n_features,), default=None
-        Point subtracted from the rows before the product (zero when None).
+        Point subtracted from the rows of the columns (see :func:`augmented_columns`).
 
     Returns
     -------
-    factors : ndarray of shape (n_states * n_features, n_features)
-        ``[P_0^T; P_1^T; ...]`` stacked vertically.
-    offsets : ndarray of shape (n_states * n_features, 1)
-        ``[(mu_0 - shift) P_0, ...]`` as a column.
+    factors : ndarray of shape (n_states * n_features, n_features + 1)
+        ``[P_k^T, -P_k^T (mu_k - shift)] / sqrt(2)`` stacked vertically: one product with the
+        augmented columns gives every state's scaled Mahalanobis terms, offset included.
     norms : ndarray of shape (n_states, 1)
         Log normalising constants ``log det(P_k) - n_features / 2 log(2 pi)``.
     """
     n_states, n_features = means.shape
     centred = means if shift is None else means - shift
-    factors = np.ascontiguousarray(precisions_chol.transpose(0, 2, 1)).reshape(
-        n_states * n_features, n_features
-    )
-    offsets = np.einsum("kf,kfg->kg", centred, precisions_chol).reshape(-1, 1)
+    factors = np.empty((n_states, n_features, n_features + 1))
+    factors[:, :, :n_features] = precisions_chol.transpose(0, 2, 1)
+    factors[:, :, n_features] = -np.einsum("kf,kfg->kg", centred, precisions_chol)
+    factors *= np.sqrt(0.5)
     norms = log_det_cholesky(precisions_chol) - 0.5 * n_features * LOG_2PI
-    return factors, offsets, norms[:, np.newaxis]
+    return factors.reshape(n_states * n_features, n_features + 1), norms[:, np.newaxis]
 
 
-def shifted_transpose(X, shift=None):
-    """``(X - shift).T`` as a C-contiguous (n_features, n_rows) array."""
-    out = np.empty((X.shape[1], X.shape[0]))
+def augmented_columns(X, shift=None):
+    """The rows of ``X - shift`` as columns, with a last row of ones.
+
+    Returns a C-contiguous array of shape (n_features + 1, n_rows): a chunk of rows is then a
+    slice of columns that every product reads as it is, and the row of ones carries the
+    offsets of :func:`stack_gaussians` and the weights and first moments of
+    :class:`MomentSums`.
+    """
+    n_rows, n_features = X.shape
+    out = np.empty((n_features + 1, n_rows))
     if shift is None:
-        out[...] = X.T
-        return out
-    return np.subtract(X.T, shift[:, np.newaxis], out=out)
+        out[:n_features] = X.T
+    else:
+        np.subtract(X.T, shift[:, np.newaxis], out=out[:n_features])
+    out[n_features] = 1.0
+    return out
 
 
-def log_gaussian_prob_stacked(XT, factors, offsets, norms):
-    """Log-densities of the rows of one chunk, state-major (see :func:`stack_gaussians`).
+def log_gaussian_prob_stacked(columns, factors, norms):
+    """Log-densities of the rows of one chunk under every state, shape (n_states, n_rows).
 
-    The chunk is given transposed, ``XT`` of shape (n_features, n_rows), with the ``shift`` of
-    :func:`stack_gaussians` already subtracted (see :func:`shifted_transpose`). The result has
-    shape (n_states, n_rows): every elementwise step and every reduction over states then runs
-    along long contiguous rows, which NumPy vectorises, instead of along a short last axis.
+    ``columns`` are augmented columns (:func:`augmented_columns`) shifted as the ``shift`` of
+    :func:`stack_gaussians`. The result is state-major: every elementwise step and every
+    reduction over states then runs along long contiguous rows, which NumPy vectorises.
     """
     n_states = norms.shape[0]
-    projected = factors @ XT
-    projected -= offsets
+    projected = factors @ columns
     np.square(projected, out=projected)
-    log_prob = projected.reshape(n_states, -1, XT.shape[1]).sum(axis=1)
-    log_prob *= -0.5
-    log_prob += norms
-    return log_prob
+    half_distances = projected.reshape(n_states, -1, columns.shape[1]).sum(axis=1)
+    return np.subtract(norms, half_distances, out=half_distances)
 
 
 def estimate_log_gaussian_prob(X, means, precisions_chol, chunk_size=None):
@@ -139,30 +146,77 @@ def estimate_log_gaussian_prob(X, means, precisions_chol, chunk_size=None):
     step = chunk_size_for(n_states * n_features, chunk_size)
     for start in range(0, n_samples, step):
         rows = slice(start, start + step)
-        log_prob[rows] = log_gaussian_prob_stacked(shifted_transpose(X[rows]), *stacked).T
+        log_prob[rows] = log_gaussian_prob_stacked(augmented_columns(X[rows]), *stacked).T
     return log_prob
 
 
-def accumulate_moments(respT, XT, first, second):
-    """Add the weighted first and second raw moments of one chunk to ``first`` and ``second``.
+class MomentSums:
+    """Weighted moments ``sum_t r_tk [x_t; 1] [x_t; 1]^T`` of augmented columns, chunk by chunk.
+
+    The result holds, per state, the second moments, the first moments in the last column and
+    the weight in the corner (see :func:`split_moments`). Two ways give the same sums:
+
+    - one symmetric product per state of its ``sqrt(r)``-weighted columns (BLAS syrk), best
+      with few states;
+    - one product of all states' posteriors with the pairwise products of the columns
+      (``x_a x_b`` for ``a <= b``, built once per chunk), best when there are at least as many
+      states as columns: one BLAS call per chunk instead of one per state.
 
     Parameters
     ----------
-    respT : ndarray of shape (n_states, n_rows)
-        Posteriors of the chunk, state-major.
-    XT : ndarray of shape (n_features, n_rows)
-        Rows of the chunk, shifted and transposed (see :func:`shifted_transpose`).
-    first : ndarray of shape (n_states, n_features)
-        ``sum_t r_tk x_t``, updated in place.
-    second : ndarray of shape (n_states, n_features, n_features)
-        ``sum_t r_tk x_t x_t^T``, updated in place.
+    n_states : int
+    n_columns : int
+        Number of augmented columns (features + 1).
+    states : list of int, default=None
+        States whose moments are accumulated (all when None); the others stay zero.
     """
-    n_features, n_rows = XT.shape
-    n_states = respT.shape[0]
-    first += respT @ XT.T
-    # All states' weighted rows in one (n_states * n_features, n_rows) array: one product.
-    weighted = (respT[:, np.newaxis, :] * XT[np.newaxis]).reshape(-1, n_rows)
-    second += (weighted @ XT.T).reshape(n_states, n_features, n_features)
+
+    def __init__(self, n_states, n_columns, states=None):
+        self.n_states = n_states
+        self.n_columns = n_columns
+        self.states = list(range(n_states)) if states is None else list(states)
+        self.use_pairs = len(self.states) >= n_columns
+        if self.use_pairs:
+            rows, cols = np.triu_indices(n_columns)
+            self._pairs = (rows.astype(np.int64), cols.astype(np.int64))
+            self._sums = np.zeros((len(self.states), len(rows)))
+        else:
+            self._sums = np.zeros((n_states, n_columns, n_columns))
+
+    def add(self, respT, columns):
+        """Add one chunk: posteriors (n_states, n_rows) and augmented columns."""
+        if self.use_pairs:
+            products = np.empty((len(self._pairs[0]), columns.shape[1]))
+            pairwise_products(columns, *self._pairs, products)
+            weights = respT if len(self.states) == self.n_states else respT[self.states]
+            self._sums += weights @ products.T
+            return
+        for k in self.states:
+            # (sqrt(r) x)(sqrt(r) x)^T is a product of an array with its own transpose, which
+            # NumPy hands to BLAS syrk (half the work of a general product).
+            rooted = columns * np.sqrt(respT[k])
+            self._sums[k] += rooted @ rooted.T
+
+    def result(self):
+        """The sums, shape (n_states, n_columns, n_columns)."""
+        if not self.use_pairs:
+            return self._sums
+        moments = np.zeros((self.n_states, self.n_columns, self.n_columns))
+        rows, cols = self._pairs
+        states = np.asarray(self.states)[:, np.newaxis]
+        moments[states, rows, cols] = self._sums
+        moments[states, cols, rows] = self._sums
+        return moments
+
+
+def split_moments(moments):
+    """``(weights, first, second)`` views of augmented moments (:class:`MomentSums`)."""
+    n_features = moments.shape[1] - 1
+    return (
+        moments[:, n_features, n_features],
+        moments[:, :n_features, n_features],
+        moments[:, :n_features, :n_features],
+    )
 
 
 def weighted_moments(resp, X, shift=None, chunk_size=None):
@@ -185,15 +239,12 @@ def weighted_moments(resp, X, shift=None, chunk_size=None):
     """
     n_samples, n_features = X.shape
     n_states = resp.shape[1]
-    weights = resp.sum(axis=0)
-    first = np.zeros((n_states, n_features))
-    second = np.zeros((n_states, n_features, n_features))
+    sums = MomentSums(n_states, n_features + 1)
     step = chunk_size_for(n_states * n_features, chunk_size)
     for start in range(0, n_samples, step):
         rows = slice(start, start + step)
-        respT = np.ascontiguousarray(resp[rows].T)
-        accumulate_moments(respT, shifted_transpose(X[rows], shift), first, second)
-    return weights, first, second
+        sums.add(np.ascontiguousarray(resp[rows].T), augmented_columns(X[rows], shift))
+    return split_moments(sums.result())
 
 
 def gaussians_from_moments(weights, first, second, reg_covar, shift=None):

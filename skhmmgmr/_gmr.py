@@ -13,16 +13,16 @@ look-ahead) and mixes the per-state conditional means with the filtered state pr
 from dataclasses import dataclass
 
 import numpy as np
-from hmmlearn import _hmmc
 from scipy import linalg
 
 from ._gaussian import (
+    augmented_columns,
     chunk_size_for,
     compute_precision_cholesky,
     log_gaussian_prob_stacked,
-    shifted_transpose,
     stack_gaussians,
 )
+from ._kernels import forward
 
 
 @dataclass
@@ -73,45 +73,31 @@ def filter_state_probabilities(X, recordings, params, chunk_size=None):
 
     The recursion restarts from the start probabilities at the first row of every recording.
     The input densities are computed chunk by chunk (all states in one product per chunk).
+    When no state that the transitions allow explains a row (every product underflows), the
+    recursion restarts at that row from the input densities alone instead of producing NaN.
     """
     n_samples = X.shape[0]
     n_states, n_inputs = params.input_means.shape
     stacked = stack_gaussians(params.input_means, params.input_precisions_chol)
     step = chunk_size_for(n_states * n_inputs, chunk_size)
-    frameprob = np.empty((n_samples, n_states))
+    frames = np.empty((n_samples, n_states))
     for start in range(0, n_samples, step):
         rows = slice(start, start + step)
-        log_prob = log_gaussian_prob_stacked(shifted_transpose(X[rows]), *stacked)
+        log_prob = log_gaussian_prob_stacked(augmented_columns(X[rows]), *stacked)
         log_prob -= log_prob.max(axis=0)
         np.exp(log_prob, out=log_prob)
-        frameprob[rows] = log_prob.T
-    alpha = np.empty_like(frameprob)
-    for _, rows in recordings.slices():
-        try:
-            _, alpha[rows], _ = _hmmc.forward_scaling(
-                params.startprob, params.transmat, frameprob[rows]
-            )
-        except ValueError:
-            alpha[rows] = _forward_with_restarts(params.startprob, params.transmat, frameprob[rows])
-    return alpha
-
-
-def _forward_with_restarts(startprob, transmat, frameprob):
-    """Slow, safe forward recursion for a recording that the compiled kernel rejects.
-
-    When no state that the transitions allow explains a row (every product underflows), the
-    recursion restarts at that row from the input densities alone instead of producing NaN.
-    """
-    alpha = np.empty_like(frameprob)
-    prior = startprob
-    for t, frames in enumerate(frameprob):
-        current = prior * frames
-        total = current.sum()
-        if not total > 0.0:
-            current = frames
-            total = current.sum()
-        alpha[t] = current / total
-        prior = alpha[t] @ transmat
+        frames[rows] = log_prob.T
+    alpha = np.empty_like(frames)
+    forward(
+        frames,
+        np.asarray(recordings.starts, dtype=np.int64),
+        np.asarray(recordings.stops, dtype=np.int64),
+        params.startprob,
+        params.transmat,
+        alpha,
+        np.empty(n_samples),
+        restart=True,
+    )
     return alpha
 
 

@@ -11,7 +11,7 @@ from sklearn.utils import metadata_routing
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ._em import INIT_METHODS, HMMParameters, fit_hmm, score_hmm
+from ._em import INIT_METHODS, Columns, HMMParameters, fit_hmm, score_hmm
 from ._gmr import condition_on_inputs, conditional_means, filter_state_probabilities, mix_estimates
 from ._sequences import as_recordings
 from ._validation import check_finite, check_target_finite, column_names_of
@@ -174,8 +174,7 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
             column_names=[f"output {i}" for i in range(Y.shape[1])],
             recordings=recordings,
         )
-        joint = np.hstack([X, Y])
-        n_samples, n_dims = joint.shape
+        n_samples, n_dims = X.shape[0], X.shape[1] + Y.shape[1]
         if n_samples < self.n_states:
             raise ValueError(
                 f"n_states={self.n_states} is more than the data support: every state needs at "
@@ -189,13 +188,8 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
                 UserWarning,
                 stacklevel=2,
             )
-        center = joint.mean(axis=0)
-        scale = joint.std(axis=0)
-        scale[scale <= 1e-12 * np.maximum(np.abs(center), 1.0)] = 1.0
-        # in place: joint is this method's own copy, and large fits should not hold two
-        standardized = joint
-        standardized -= center
-        standardized /= scale
+        # The engine's own layout, standardised in place: the only copy of the data it makes.
+        standardized, center, scale = Columns.standardized(X, Y)
         result = fit_hmm(
             standardized,
             recordings,
