@@ -52,8 +52,8 @@ MIN_STATE_WEIGHT = 1.0
 # Consecutive short recordings are grouped into blocks of about this many rows.
 BLOCK_ROWS = 8192
 
-# The k-means initialisations cluster a random sample of at most this many rows; every row
-# then joins its nearest centre.
+# The k-means initialisations cluster an evenly spaced sample of at most this many rows;
+# every row then joins its nearest centre.
 INIT_SAMPLE_ROWS = 100_000
 
 # Below this many values (rows x columns) KMeans runs on one OpenMP thread.
@@ -335,11 +335,15 @@ def m_step(stats, previous, reg_covar):
 
 
 def _init_sample(data, random_state):
-    """The rows (about the shift) that the k-means initialisations cluster: all, or a sample."""
+    """The rows (about the shift) that the k-means initialisations cluster.
+
+    All rows, or every ``step``-th row from a random offset: evenly spread over all
+    recordings, and a slice that is copied without a gather.
+    """
     if data.n_samples <= INIT_SAMPLE_ROWS:
         return data.rows()
-    rows = np.sort(random_state.choice(data.n_samples, size=INIT_SAMPLE_ROWS, replace=False))
-    return data.rows(rows)
+    step = -(-data.n_samples // INIT_SAMPLE_ROWS)
+    return data.rows(slice(random_state.randint(step), None, step))
 
 
 def _kmeans_centers(sample, n_states, random_state):

@@ -8,7 +8,10 @@ per (model, validation recording).
 """
 
 import numbers
+import os
+import tempfile
 import warnings
+from contextlib import contextmanager
 
 import joblib
 import numpy as np
@@ -74,28 +77,48 @@ def check_recording_splits(cv, X, y, groups):
 
 
 def _fit_and_evaluate(
-    data, splits, data_token, fold, estimator, columns, params, sampling_period, with_bic
+    folds, data_token, fold, estimator, columns, params, sampling_period, with_bic
 ):
-    # ``data`` and ``splits`` are left out of the cache key; ``data_token`` stands for them.
-    X, y, groups = data
-    train, val = splits[fold]
+    # ``folds`` is left out of the cache key; ``data_token`` stands for it.
+    X_train, y_train, groups_train, X_val, y_val, groups_val = folds[fold]
     columns = list(columns)
     model = clone(estimator).set_params(**params)
+    X_fit = X_train[:, columns]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        model.fit(X[train][:, columns], y[train], groups=groups[train])
-    X_val = X[val][:, columns]
+        model.fit(X_fit, y_train, groups=groups_train)
     table = evaluate_recordings(
-        y[val],
-        model.predict(X_val, groups=groups[val]),
-        groups=groups[val],
+        y_val,
+        model.predict(X_val[:, columns], groups=groups_val),
+        groups=groups_val,
         sampling_period=sampling_period,
     )
     table.insert(0, "fold", fold)
     table["converged"] = bool(getattr(model, "converged_", True))
     if with_bic:
-        table["bic"] = model.bic(X[train][:, columns], y[train], groups=groups[train])
+        table["bic"] = model.bic(X_fit, y_train, groups=groups_train)
     return table
+
+
+def _fold_arrays(X, y, codes, splits):
+    """Training and validation arrays of every split, sliced once for all models."""
+    return [(X[train], y[train], codes[train], X[val], y[val], codes[val]) for train, val in splits]
+
+
+@contextmanager
+def _shared_with_workers(folds, n_jobs):
+    """The fold arrays as read-only memory maps when models are fitted in other processes.
+
+    joblib would otherwise hash and copy the data for every model it sends to a worker; a
+    memory-mapped array is sent as its file name.
+    """
+    if n_jobs in (None, 1):
+        yield folds
+        return
+    with tempfile.TemporaryDirectory(prefix="skhmmgmr-", ignore_cleanup_errors=True) as folder:
+        path = os.path.join(folder, "folds.joblib")
+        joblib.dump(folds, path)
+        yield joblib.load(path, mmap_mode="r")
 
 
 def evaluate_models(
@@ -131,35 +154,40 @@ def evaluate_models(
     token = None
     if getattr(memory, "location", None) is not None:
         token = joblib.hash((X, y, groups, [(t, v) for t, v in splits]))
-    task = memory.cache(_fit_and_evaluate, ignore=["data", "splits"])
+    task = memory.cache(_fit_and_evaluate, ignore=["folds"])
     estimator = clone(estimator)
-    jobs = (
-        joblib.delayed(task)(
-            data=(X, y, groups),
-            splits=splits,
-            data_token=token,
-            fold=fold,
-            estimator=estimator,
-            columns=tuple(int(c) for c in columns),
-            params=dict(params),
-            sampling_period=sampling_period,
-            with_bic=with_bic,
-        )
-        for columns, params in models
-        for fold in range(len(splits))
-    )
+    # Recordings travel as integer codes: string ids would be pickled for every model and
+    # re-encoded by every fit.
+    codes, recording_ids = pd.factorize(np.asarray(groups), sort=False)
     n_tasks = len(models) * len(splits)
-    parallel = joblib.Parallel(n_jobs=n_jobs, return_as="generator")
-    # The models are small: BLAS and OpenMP threads (k-means) on them only spin, and
-    # the parallelism is over models (joblib workers get their own limits).
-    with threadpool_limits(limits=1):
-        tables = list(tqdm(parallel(jobs), total=n_tasks, desc=desc, disable=not verbose))
+    with _shared_with_workers(_fold_arrays(X, y, codes, splits), n_jobs) as folds:
+        jobs = (
+            joblib.delayed(task)(
+                folds=folds,
+                data_token=token,
+                fold=fold,
+                estimator=estimator,
+                columns=tuple(int(c) for c in columns),
+                params=dict(params),
+                sampling_period=sampling_period,
+                with_bic=with_bic,
+            )
+            for columns, params in models
+            for fold in range(len(splits))
+        )
+        parallel = joblib.Parallel(n_jobs=n_jobs, return_as="generator")
+        # The models are small: BLAS and OpenMP threads (k-means) on them only spin, and
+        # the parallelism is over models (joblib workers get their own limits).
+        with threadpool_limits(limits=1):
+            tables = list(tqdm(parallel(jobs), total=n_tasks, desc=desc, disable=not verbose))
+    if not tables:
+        return pd.DataFrame(columns=["model", "fold", "recording", "n_samples", *METRICS])
     model_ids = np.repeat(np.arange(len(models)), len(splits))
     for model_id, table in zip(model_ids, tables, strict=True):
         table.insert(0, "model", model_id)
-    if not tables:
-        return pd.DataFrame(columns=["model", "fold", "recording", "n_samples", *METRICS])
-    return pd.concat(tables, ignore_index=True)
+    table = pd.concat(tables, ignore_index=True)
+    table["recording"] = recording_ids[table["recording"].to_numpy(dtype=int)]
+    return table
 
 
 # --------------------------------------------------------------------------------------------

@@ -97,14 +97,21 @@ def _contiguous_recordings(groups, n_samples):
         )
     if n_samples == 0:
         raise ValueError("X has no rows")
-    if pd.isna(groups).any():
-        row = int(np.flatnonzero(pd.isna(groups))[0])
-        raise ValueError(f"groups contains a missing recording id (first at row {row})")
-    codes, _ = pd.factorize(groups, sort=False)
-    change = np.flatnonzero(codes[1:] != codes[:-1]) + 1
+    # Recordings start where the id changes; a missing id (None, NaN) starts a recording too
+    # (NaN differs from itself), so the checks below need only the first id of each.
+    try:
+        differs = np.asarray(groups[1:] != groups[:-1], dtype=bool)
+    except TypeError:  # ids such as pd.NA, whose comparisons are not booleans
+        codes = pd.factorize(groups, sort=False, use_na_sentinel=False)[0]
+        differs = codes[1:] != codes[:-1]
+    change = np.flatnonzero(differs) + 1
     starts = np.concatenate(([0], change))
     stops = np.concatenate((change, [n_samples]))
-    block_codes = codes[starts]
+    missing = pd.isna(groups[starts])
+    if missing.any():
+        row = int(starts[np.flatnonzero(missing)[0]])
+        raise ValueError(f"groups contains a missing recording id (first at row {row})")
+    block_codes, _ = pd.factorize(groups[starts], sort=False)
     if len(np.unique(block_codes)) != len(block_codes):
         _raise_not_contiguous(groups.tolist(), block_codes, starts, stops)
     # Plain Python ids (not NumPy scalars), so that messages show 'r1' rather than np.str_('r1').

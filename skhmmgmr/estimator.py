@@ -190,17 +190,7 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
             )
         # The engine's own layout, standardised in place: the only copy of the data it makes.
         standardized, center, scale = Columns.standardized(X, Y)
-        result = fit_hmm(
-            standardized,
-            recordings,
-            self.n_states,
-            n_init=self.n_init,
-            init_params=self.init_params,
-            n_iter=self.n_iter,
-            tol=self.tol,
-            reg_covar=self.reg_covar,
-            random_state=self.random_state,
-        )
+        result = self._baum_welch(standardized, recordings)
         if not result.converged:
             warnings.warn(
                 f"EM did not converge in n_iter={self.n_iter} iterations (tol={self.tol}); "
@@ -224,6 +214,20 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
             for i, value in enumerate(self.log_likelihood_history_):
                 print(f"EM iteration {i}: log-likelihood {value:.6f}")
         return self
+
+    def _baum_welch(self, columns, recordings):
+        # The one place the EM engine is called (a reference engine can stand in for it).
+        return fit_hmm(
+            columns,
+            recordings,
+            self.n_states,
+            n_init=self.n_init,
+            init_params=self.init_params,
+            n_iter=self.n_iter,
+            tol=self.tol,
+            reg_covar=self.reg_covar,
+            random_state=self.random_state,
+        )
 
     def _gmr_parameters(self):
         n_inputs = self.n_features_in_

@@ -218,7 +218,9 @@ class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
             raise ValueError(f"k_min={self.k_min} > k_max={self.k_max}")
         X, y, groups, splits = self._validate_search(X, y, groups)
         estimator = default_estimator() if self.estimator is None else self.estimator
-        ks = list(range(self.k_min, self.k_max + 1))
+        # Largest K first: the longest fits start at once instead of finishing last on one
+        # worker while the others are idle.
+        ks = list(range(self.k_max, self.k_min - 1, -1))
         columns = tuple(range(X.shape[1]))
         table = evaluate_models(
             estimator,
@@ -235,7 +237,11 @@ class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
             desc="number of states",
         )
         table.insert(0, "n_states", [ks[i] for i in table["model"]])
-        self.results_ = table.drop(columns="model")
+        self.results_ = (
+            table.drop(columns="model")
+            .sort_values(["n_states", "fold"], kind="stable")
+            .reset_index(drop=True)
+        )
         per_fold = self.results_.drop_duplicates(["n_states", "fold"])
         self.bic_ = per_fold.groupby("n_states", as_index=False)["bic"].sum()
         self.n_states_bic_ = int(self.bic_.loc[self.bic_["bic"].idxmin(), "n_states"])

@@ -7,6 +7,8 @@ from scipy.stats import multivariate_normal
 
 from skhmmgmr._em import HMMParameters, _blocks, _Engine, e_step, initialize_parameters
 from skhmmgmr._gaussian import (
+    MomentSums,
+    augmented_columns,
     compute_precision_cholesky,
     estimate_log_gaussian_prob,
     gaussians_from_moments,
@@ -18,6 +20,7 @@ from skhmmgmr._gmr import (
     filter_state_probabilities,
     mix_estimates,
 )
+from skhmmgmr._kernels import VECTORISED_STATES, forward
 from skhmmgmr._sequences import Recordings
 
 
@@ -126,18 +129,21 @@ def reference_e_step(X, recordings, params):
 
 
 @pytest.mark.parametrize(("chunk_size", "block_size"), [(None, None), (5, 5), (3, 40)])
-def test_e_step_matches_log_space_reference(chunk_size, block_size):
+@pytest.mark.parametrize("n_states", [3, VECTORISED_STATES + 1])
+def test_e_step_matches_log_space_reference(chunk_size, block_size, n_states):
+    # 3 states: plain recursions, per-state moments; 9 states over 3 features: vectorised
+    # recursions and moments from the pairwise products of the columns.
     rng = np.random.default_rng(3)
     X = rng.normal(size=(90, 3))
     recordings = random_recordings(rng, np.array([30, 1, 17, 2, 40]))
-    means, covariances = random_gaussians(rng, 3, 3)
+    means, covariances = random_gaussians(rng, n_states, 3)
     params = HMMParameters(
-        startprob=np.array([0.2, 0.5, 0.3]),
-        transmat=rng.dirichlet(np.ones(3) * 3, size=3),
+        startprob=rng.dirichlet(np.ones(n_states) * 2),
+        transmat=rng.dirichlet(np.ones(n_states) * 3, size=n_states),
         means=means * 0.5,
         covariances=covariances,
     )
-    engine = _Engine(X, recordings, 3, chunk_size=chunk_size, block_size=block_size)
+    engine = _Engine(X, recordings, n_states, chunk_size=chunk_size, block_size=block_size)
     stats = e_step(engine, params)
     total, resp, start, trans = reference_e_step(X, recordings, params)
     Xs = X - stats.shift
@@ -149,6 +155,68 @@ def test_e_step_matches_log_space_reference(chunk_size, block_size):
     np.testing.assert_allclose(
         stats.second_moments, np.einsum("nk,ni,nj->kij", resp, Xs, Xs), rtol=1e-9, atol=1e-12
     )
+
+
+def test_heaviest_state_from_totals_matches_full_accumulation():
+    # From the second E-step on, one state's moments are the totals minus the others'.
+    rng = np.random.default_rng(8)
+    X = rng.normal(size=(3000, 4)) + 5.0
+    recordings = random_recordings(rng, np.array([1000, 2000]))
+    params = initialize_parameters(X, recordings, 2, "kmeans", 1e-6, np.random.RandomState(0))
+    engine = _Engine(X, recordings, 2)
+    e_step(engine, params)
+    assert engine.remainder is not None
+    derived = e_step(engine, params)
+    engine.remainder = None
+    full = e_step(engine, params)
+    for name in ("state_weights", "first_moments", "second_moments"):
+        np.testing.assert_allclose(
+            getattr(derived, name), getattr(full, name), rtol=1e-10, atol=1e-8
+        )
+
+
+@pytest.mark.parametrize("n_states", [2, 6, 12])
+def test_moment_sums_by_state_products_and_by_pairs_agree(n_states):
+    rng = np.random.default_rng(9)
+    columns = augmented_columns(rng.normal(size=(500, 5)))
+    respT = rng.dirichlet(np.ones(n_states), size=500).T.copy()
+    sums = MomentSums(n_states, 6)
+    sums.add(respT[:, :200], columns[:, :200])
+    sums.add(respT[:, 200:], columns[:, 200:])
+    assert sums.use_pairs == (n_states >= 6)
+    expected = np.einsum("kt,at,bt->kab", respT, columns, columns)
+    np.testing.assert_allclose(sums.result(), expected, rtol=1e-12, atol=1e-12)
+    only = MomentSums(n_states, 6, states=[0, n_states - 1])
+    only.add(respT, columns)
+    np.testing.assert_allclose(only.result()[[0, -1]], expected[[0, -1]], rtol=1e-12)
+    assert not only.result()[1:-1].any()
+
+
+@pytest.mark.parametrize("n_states", [2, VECTORISED_STATES])
+def test_forward_kernel_matches_plain_loop_and_restarts(n_states):
+    rng = np.random.default_rng(10)
+    frames = rng.random((40, n_states)) + 0.01
+    transmat = rng.dirichlet(np.ones(n_states), size=n_states)
+    transmat[:, 0] = 0.0  # state 0 can only start a recording
+    transmat /= transmat.sum(axis=1, keepdims=True)
+    startprob = np.full(n_states, 1.0 / n_states)
+    frames[25] = 0.0
+    frames[25, 0] = 1.0  # row 25 fits state 0 only: impossible after row 24
+    starts, stops = np.array([0, 10]), np.array([10, 40])
+    alpha, scale = np.empty_like(frames), np.empty(40)
+    assert not forward(frames, starts, stops, startprob, transmat, alpha, scale)
+    assert forward(frames, starts, stops, startprob, transmat, alpha, scale, restart=True)
+    expected = np.empty_like(frames)
+    for lo, hi in zip(starts, stops, strict=True):
+        prior = startprob
+        for t in range(lo, hi):
+            value = prior * frames[t]
+            if value.sum() == 0:
+                value = frames[t]
+            expected[t] = value / value.sum()
+            prior = expected[t] @ transmat
+    np.testing.assert_allclose(alpha, expected, rtol=1e-13)
+    assert alpha[25, 0] == 1.0
 
 
 def test_e_step_statistics_do_not_depend_on_chunking():

@@ -138,9 +138,10 @@ def test_predict_before_fit(frame):
             method(X)
 
 
-def test_missing_recording_id(frame):
+@pytest.mark.parametrize("missing", [None, np.nan, pd.NA])
+def test_missing_recording_id(frame, missing):
     X, y, groups = frame
     groups = groups.astype(object)
-    groups[7] = None
+    groups[7:9] = missing
     with pytest.raises(ValueError, match=r"missing recording id \(first at row 7\)"):
         HMMGMRRegressor(n_states=2).fit(X, y, groups=groups)

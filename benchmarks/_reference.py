@@ -1,0 +1,106 @@
+"""A slow reference for the selection framework: the same model, fitted by public parts only.
+
+:class:`ReferenceHMMGMR` is :class:`skhmmgmr.HMMGMRRegressor` with its EM engine replaced by
+a plain implementation of the same algorithm that shares no numerics with the package's:
+emission densities from ``sklearn.mixture`` (Cholesky factors, one pass over all rows per
+state), hmmlearn's compiled scaled forward, backward and expected-transition kernels per
+recording, moments by plain NumPy over all rows, and the k-means start on *all* rows (the
+package clusters a sample of at most 100,000 rows). Everything else (validation,
+standardisation, the causal GMR read-out, the selection logic) is the package's, so that a
+difference between the two framework runs can only come from the fitted HMMs.
+"""
+
+import numpy as np
+from hmmlearn import _hmmc
+from sklearn.cluster import KMeans
+from sklearn.mixture._gaussian_mixture import (
+    _compute_precision_cholesky,
+    _estimate_log_gaussian_prob,
+)
+from sklearn.utils import check_random_state
+
+from skhmmgmr import HMMGMRRegressor
+from skhmmgmr._em import MIN_STATE_WEIGHT, EMResult, HMMParameters
+
+
+def _gaussians(resp, X, reg_covar, previous=None):
+    weights = resp.sum(axis=0)
+    means = np.empty((resp.shape[1], X.shape[1]))
+    covariances = np.empty((resp.shape[1], X.shape[1], X.shape[1]))
+    for k, weight in enumerate(weights):
+        if previous is not None and weight < MIN_STATE_WEIGHT:
+            means[k], covariances[k] = previous.means[k], previous.covariances[k]
+            continue
+        means[k] = resp[:, k] @ X / weight
+        diff = X - means[k]
+        covariances[k] = (resp[:, k, np.newaxis] * diff).T @ diff / weight
+        covariances[k].flat[:: X.shape[1] + 1] += reg_covar
+    return weights, means, covariances
+
+
+def _initial_parameters(X, n_states, reg_covar, random_state):
+    labels = KMeans(n_clusters=n_states, n_init=1, random_state=random_state).fit(X).labels_
+    resp = np.zeros((len(X), n_states))
+    resp[np.arange(len(X)), labels] = 1.0
+    weights, means, covariances = _gaussians(np.maximum(resp, 1e-300), X, reg_covar)
+    pooled = np.cov(X, rowvar=False, bias=True) + reg_covar * np.eye(X.shape[1])
+    covariances[weights < X.shape[1] + 1] = pooled
+    startprob = np.full(n_states, 1.0 / n_states)
+    transmat = random_state.dirichlet(np.ones(n_states), size=n_states)
+    return HMMParameters(startprob, transmat, means, covariances)
+
+
+def _e_step(X, bounds, params):
+    precisions_chol = _compute_precision_cholesky(params.covariances, "full")
+    log_b = _estimate_log_gaussian_prob(X, params.means, precisions_chol, "full")
+    top = log_b.max(axis=1, keepdims=True)
+    frames = np.exp(log_b - top)
+    resp = np.empty_like(frames)
+    start = np.zeros(params.n_states)
+    xi = np.zeros((params.n_states, params.n_states))
+    log_likelihood = float(top.sum())
+    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+        rows = frames[lo:hi]
+        log_p, fwd, scaling = _hmmc.forward_scaling(params.startprob, params.transmat, rows)
+        bwd = _hmmc.backward_scaling(params.startprob, params.transmat, rows, scaling)
+        log_likelihood += log_p
+        posterior = fwd * bwd
+        resp[lo:hi] = posterior / posterior.sum(axis=1, keepdims=True)
+        start += resp[lo]
+        if hi - lo > 1:
+            xi += _hmmc.compute_scaling_xi_sum(fwd, params.transmat, bwd, rows)
+    return log_likelihood, resp, start, xi
+
+
+def reference_baum_welch(X, bounds, n_states, *, n_iter, tol, reg_covar, random_state):
+    """EM from a k-means start on all rows; returns an :class:`skhmmgmr._em.EMResult`."""
+    params = _initial_parameters(X, n_states, reg_covar, check_random_state(random_state))
+    history, converged = [], False
+    for _ in range(n_iter):
+        log_likelihood, resp, start, xi = _e_step(X, bounds, params)
+        history.append(log_likelihood)
+        if len(history) > 1 and abs(history[-1] - history[-2]) < tol * len(X):
+            converged = True
+            break
+        transmat = xi / xi.sum(axis=1, keepdims=True)
+        _, means, covariances = _gaussians(resp, X, reg_covar, previous=params)
+        params = HMMParameters(start / start.sum(), transmat, means, covariances)
+    else:
+        history.append(_e_step(X, bounds, params)[0])
+    return EMResult(params, history[-1], history, min(len(history), n_iter), converged)
+
+
+class ReferenceHMMGMR(HMMGMRRegressor):
+    """:class:`~skhmmgmr.HMMGMRRegressor` fitted by :func:`reference_baum_welch`."""
+
+    def _baum_welch(self, columns, recordings):
+        bounds = np.append(recordings.starts, recordings.stops[-1])
+        return reference_baum_welch(
+            columns.rows(),
+            bounds,
+            self.n_states,
+            n_iter=self.n_iter,
+            tol=self.tol,
+            reg_covar=self.reg_covar,
+            random_state=self.random_state,
+        )
