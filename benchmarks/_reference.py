@@ -104,3 +104,41 @@ class ReferenceHMMGMR(HMMGMRRegressor):
             reg_covar=self.reg_covar,
             random_state=self.random_state,
         )
+
+
+class PeerHMMGMR(HMMGMRRegressor):
+    """:class:`~skhmmgmr.HMMGMRRegressor` whose HMM is fitted by hmmlearn's ``GaussianHMM``.
+
+    The peer library starts from the package's initial parameters (same k-means start, same
+    random transitions) and stops on the same per-row tolerance, so that its time per model
+    is comparable; its regularisation is a covariance prior instead of ``reg_covar``.
+    """
+
+    def _baum_welch(self, columns, recordings):
+        from hmmlearn.hmm import GaussianHMM
+
+        from skhmmgmr._em import initialize_parameters
+
+        start = initialize_parameters(
+            columns,
+            recordings,
+            self.n_states,
+            self.init_params,
+            self.reg_covar,
+            check_random_state(self.random_state),
+        )
+        n_samples, n_dims = columns.n_samples, columns.n_features
+        peer = GaussianHMM(
+            n_components=self.n_states,
+            covariance_type="full",
+            n_iter=self.n_iter,
+            tol=self.tol * n_samples,
+            init_params="",
+            covars_prior=self.reg_covar * np.eye(n_dims),
+        )
+        peer.startprob_, peer.transmat_ = start.startprob, start.transmat
+        peer.means_, peer.covars_ = start.means, start.covariances
+        peer.fit(columns.rows(), lengths=np.asarray(recordings.lengths))
+        params = HMMParameters(peer.startprob_, peer.transmat_, peer.means_, peer.covars_)
+        history = list(peer.monitor_.history)
+        return EMResult(params, history[-1], history, peer.monitor_.iter, peer.monitor_.converged)

@@ -87,7 +87,13 @@ def run_case(name, n_inputs, n_states, args):
     rel_diff = np.max(np.abs(ours_history - peer_history) / np.abs(peer_history))
     ours, peer = np.median(ours_times), np.median(peer_times)
     print(f"{name:<14} {ours:>10.4f} {peer:>10.4f} {peer / ours:>7.1f}x {rel_diff:>12.1e}")
-    return ours, peer, rel_diff
+    return {
+        "case": name,
+        "ours_s": ours,
+        "hmmlearn_s": peer,
+        "ratio": peer / ours,
+        "max_rel_ll_diff": rel_diff,
+    }
 
 
 def main(argv=None):
@@ -108,8 +114,7 @@ def main(argv=None):
     )
     print(f"{'case':<14} {'ours (s)':>10} {'peer (s)':>10} {'ratio':>8} {'max rel LL':>12}")
     with threadpool_limits(limits=args.threads):
-        for name in args.case or CASES:
-            run_case(name, *CASES[name], args)
+        return [run_case(name, *CASES[name], args) for name in args.case or CASES]
 
 
 if __name__ == "__main__":

@@ -52,6 +52,14 @@ def run_case(n_rows, n_recordings, model, n_inputs, repeats):
         f"{name:<22} {ours:>9.4f} {theirs:>9.4f} {theirs / ours:>7.2f}x "
         f"{n_rows / ours / 1e6:>12.2f} {n_rows / theirs / 1e6:>12.2f}"
     )
+    return {
+        "case": name,
+        "ours_s": ours,
+        "gmr_s": theirs,
+        "ratio": theirs / ours,
+        "ours_rows_per_s": n_rows / ours,
+        "gmr_rows_per_s": n_rows / theirs,
+    }
 
 
 def main(argv=None):
@@ -73,8 +81,10 @@ def main(argv=None):
     )
     with threadpool_limits(limits=args.threads):
         model = HMMGMRRegressor(n_states=args.n_states, random_state=0).fit(X, y, groups=groups)
-        for n_rows, n_recordings in [(100_000, 20), (500_000, 84)]:
+        return [
             run_case(n_rows, n_recordings, model, args.n_inputs, args.repeats)
+            for n_rows, n_recordings in [(100_000, 20), (500_000, 84)]
+        ]
 
 
 if __name__ == "__main__":
