@@ -26,9 +26,11 @@ import argparse
 import itertools
 import os
 import time
+import types
 import warnings
 from math import comb
 
+import joblib
 import numpy as np
 import pandas as pd
 from _data import thesis_protocol
@@ -56,7 +58,7 @@ def load_protocol(n_drivers, cache, duration=300.0):
     return data
 
 
-def run_framework(data, estimator, n_jobs, label):
+def run_framework(data, estimator, n_jobs, label, save=None):
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
@@ -67,7 +69,22 @@ def run_framework(data, estimator, n_jobs, label):
     stages = ", ".join(f"{name} {seconds:.0f} s" for name, seconds in report.timings.items())
     print(f"{label}: {wall:.0f} s wall ({stages})")
     print(f"  subset: {', '.join(report.features)}; K={report.n_states}")
+    if save:
+        os.makedirs(save, exist_ok=True)
+        report_tables = {k: v for k, v in vars(report).items() if not k.endswith("_model")}
+        report_tables["wall_s"] = wall
+        joblib.dump(report_tables, os.path.join(save, f"{label.replace(' ', '_')}.joblib"))
     return report, wall
+
+
+def load_tables(path):
+    """The tables of a run saved with ``--save`` (e.g. ``reference_path.joblib``), as a
+    report-like namespace, and that run's wall time."""
+    tables = joblib.load(path)
+    wall = tables.pop("wall_s", None)
+    if wall is None:
+        wall = sum(tables["timings"].values())
+    return types.SimpleNamespace(**tables), wall
 
 
 def _time_subsets(estimator, data, subsets):
@@ -134,6 +151,14 @@ def compare_selections(fast, reference):
     }
     joined = pd.concat(best, axis=1).dropna()
     same_best = float((joined["fast"] == joined["reference"]).mean())
+    # Model by model: the same validation metrics mean that both engines reached the same fit.
+    metrics = fast.exhaustive.merge(
+        reference.exhaustive, on=["subset", "recording"], suffixes=("_fast", "_reference")
+    )
+    same_fit = ((metrics["accuracy_fast"] - metrics["accuracy_reference"]).abs() < 0.01) & (
+        (metrics["smoothness_fast"] - metrics["smoothness_reference"]).abs() < 1e-3
+    )
+    same_models = float(same_fit.groupby(metrics["subset"]).all().mean())
     relevance_diff = (fast.relevance - reference.relevance).abs()
     candidates = fast.candidates.set_index("name")["features"]
     candidates_ref = reference.candidates.set_index("name")["features"]
@@ -144,6 +169,7 @@ def compare_selections(fast, reference):
         paths[name] = final.groupby(["trade_off", "path"])["subset"].last()
     forward = pd.concat(paths, axis=1).dropna()
     result = {
+        "exhaustive_same_fit_share": same_models,
         "exhaustive_same_best_share": same_best,
         "forward_same_final_share": float((forward["fast"] == forward["reference"]).mean()),
         "relevance_max_count_difference": int(relevance_diff.to_numpy().max()),
@@ -155,6 +181,11 @@ def compare_selections(fast, reference):
             "list"
         ),
     }
+    print(
+        f"exhaustive models with the same validation metrics under both engines (accuracy "
+        f"within 0.01 points, smoothness within 1e-3 Nm/s on every recording): "
+        f"{same_models:.1%}"
+    )
     print(
         f"selections, fast vs reference: per-recording best exhaustive subsets identical in "
         f"{same_best:.1%} of (trade-off, recording) pairs; final forward subsets identical in "
@@ -174,10 +205,24 @@ def compare_selections(fast, reference):
     return result
 
 
-def run(n_drivers=7, n_jobs=2, cache=DEFAULT_CACHE, reference=True, peer=True, duration=300.0):
-    """All three parts; returns a dict of figures."""
+def run(
+    n_drivers=7,
+    n_jobs=2,
+    cache=DEFAULT_CACHE,
+    reference=True,
+    peer=True,
+    duration=300.0,
+    save=None,
+    reference_tables=None,
+):
+    """All three parts; returns a dict of figures.
+
+    ``save``: a folder for the selection tables of both paths. ``reference_tables``: the
+    saved tables of an earlier reference run (``reference_path.joblib``) to compare with
+    instead of running the reference path again; it does not depend on the fast engine.
+    """
     data = load_protocol(n_drivers, cache, duration)
-    fast, wall = run_framework(data, HMMGMRRegressor(random_state=0), n_jobs, "fast path")
+    fast, wall = run_framework(data, HMMGMRRegressor(random_state=0), n_jobs, "fast path", save)
     results = {
         "framework_wall_s": wall,
         "stages_s": fast.timings,
@@ -188,9 +233,18 @@ def run(n_drivers=7, n_jobs=2, cache=DEFAULT_CACHE, reference=True, peer=True, d
         top = list(fast.filter.loc[fast.filter["selected"], "feature"])
         results["peer"] = peer_exhaustive(data, top, n_jobs)
         results["peer"]["ours_exhaustive_measured_s"] = fast.timings["exhaustive"]
-    if reference:
+    if reference_tables:
+        slow, slow_wall = load_tables(reference_tables)
+        print(
+            f"reference path: tables of an earlier run ({slow_wall:.0f} s wall) from "
+            f"{reference_tables}"
+        )
+        results["reference_wall_s"] = slow_wall
+        results["reference_tables"] = reference_tables
+        results["comparison"] = compare_selections(fast, slow)
+    elif reference:
         slow, slow_wall = run_framework(
-            data, ReferenceHMMGMR(random_state=0), n_jobs, "reference path"
+            data, ReferenceHMMGMR(random_state=0), n_jobs, "reference path", save
         )
         results["reference_wall_s"] = slow_wall
         results["comparison"] = compare_selections(fast, slow)
@@ -205,6 +259,12 @@ def main(argv=None):
     parser.add_argument("--cache", default=DEFAULT_CACHE, help="simulator cache directory")
     parser.add_argument("--skip-reference", action="store_true")
     parser.add_argument("--skip-peer", action="store_true")
+    parser.add_argument("--save", default=None, help="directory for the selection tables")
+    parser.add_argument(
+        "--reference-tables",
+        default=None,
+        help="compare with the saved tables of an earlier reference run instead of running it",
+    )
     args = parser.parse_args(argv)
     return run(
         args.drivers,
@@ -213,6 +273,8 @@ def main(argv=None):
         reference=not args.skip_reference,
         peer=not args.skip_peer,
         duration=args.duration,
+        save=args.save,
+        reference_tables=args.reference_tables,
     )
 
 

@@ -115,6 +115,12 @@ def main(argv=None):
     parser.add_argument("--skip-framework", action="store_true")
     parser.add_argument("--cache", default=bench_framework.DEFAULT_CACHE)
     parser.add_argument("--output", default=None, help="write the figures as JSON")
+    parser.add_argument("--save", default=None, help="directory for the selection tables")
+    parser.add_argument(
+        "--reference-tables",
+        default=None,
+        help="saved tables of an earlier reference run to compare with (see bench_framework)",
+    )
     args = parser.parse_args(argv)
     results = {"n_jobs": args.n_jobs, "versions": _versions()}
     print("== EM ==")
@@ -124,7 +130,12 @@ def main(argv=None):
     if not args.skip_framework:
         print("\n== selection framework ==")
         results["framework"] = bench_framework.run(
-            7, n_jobs=args.n_jobs, cache=args.cache, reference=not args.skip_reference
+            7,
+            n_jobs=args.n_jobs,
+            cache=args.cache,
+            reference=not args.skip_reference,
+            save=args.save,
+            reference_tables=args.reference_tables,
         )
     print("\n== memory ==")
     results["memory"] = bench_memory.measure()

@@ -7,8 +7,10 @@ The data are held once, as augmented columns (:class:`Columns`). The E-step work
 block, a block holding whole consecutive recordings of about one cache-sized chunk of rows:
 
 1. the emission log-densities of all states, one BLAS product per chunk
-   (:func:`~skhmmgmr._gaussian.log_gaussian_prob_stacked`), scaled to a maximum of one per row
-   and exponentiated by NumPy's vectorised ``exp``;
+   (:func:`~skhmmgmr._gaussian.stack_gaussians`), scaled to a maximum of one per row and
+   exponentiated in one compiled pass (:func:`~skhmmgmr._kernels.scaled_densities`), which
+   skips the exponential where its value is known (one at the row's largest, zero below the
+   underflow);
 2. the compiled forward and backward recursions (:mod:`skhmmgmr._kernels`), which also give
    the posteriors and the terms of the expected transitions;
 3. the expected transitions as one product, and the weighted moments as one symmetric product
@@ -40,7 +42,7 @@ from ._gaussian import (
     split_moments,
     stack_gaussians,
 )
-from ._kernels import backward_posteriors, forward, scaled_log_densities
+from ._kernels import backward_posteriors, forward, scaled_densities
 
 INIT_METHODS = ("kmeans", "k-means++", "random", "random_from_data")
 
@@ -206,6 +208,7 @@ class _Engine:
             )
         ]
         self._totals = None
+        self._chunk_bounds = {}
         # State whose moments the next E-step takes as the total minus the others'.
         self.remainder = None
 
@@ -213,9 +216,14 @@ class _Engine:
         """``(lo, hi, columns[:, start + lo : start + hi])`` for chunks of rows ``start:stop``."""
         values = self.data.values
         stop = values.shape[1] if stop is None else stop
-        n_chunks = max(-(-(stop - start) // self.step), 1)
-        bounds = np.linspace(0, stop - start, n_chunks + 1).astype(int).tolist()
-        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+        # Every E-step walks the same blocks twice: their bounds are computed once per fit.
+        bounds = self._chunk_bounds.get((start, stop))
+        if bounds is None:
+            n_chunks = max(-(-(stop - start) // self.step), 1)
+            edges = np.linspace(0, stop - start, n_chunks + 1).astype(int).tolist()
+            bounds = list(zip(edges[:-1], edges[1:], strict=True))
+            self._chunk_bounds[start, stop] = bounds
+        for lo, hi in bounds:
             yield lo, hi, values[:, start + lo : start + hi]
 
     def frames(self, stacked, start, stop):
@@ -228,8 +236,7 @@ class _Engine:
         frames = np.empty((stop - start, self.n_states))
         top = np.empty(stop - start)
         for lo, hi, chunk in self.chunks(start, stop):
-            scaled_log_densities(factors @ chunk, norms[:, 0], frames[lo:hi], top[lo:hi])
-        np.exp(frames, out=frames)
+            scaled_densities(factors @ chunk, norms[:, 0], frames[lo:hi], top[lo:hi])
         return frames, float(top.sum())
 
     @property

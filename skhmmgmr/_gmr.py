@@ -19,10 +19,9 @@ from ._gaussian import (
     augmented_columns,
     chunk_size_for,
     compute_precision_cholesky,
-    log_gaussian_prob_stacked,
     stack_gaussians,
 )
-from ._kernels import forward
+from ._kernels import forward, scaled_densities
 
 
 @dataclass
@@ -78,15 +77,12 @@ def filter_state_probabilities(X, recordings, params, chunk_size=None):
     """
     n_samples = X.shape[0]
     n_states, n_inputs = params.input_means.shape
-    stacked = stack_gaussians(params.input_means, params.input_precisions_chol)
+    factors, norms = stack_gaussians(params.input_means, params.input_precisions_chol)
     step = chunk_size_for(n_states * n_inputs, chunk_size)
-    frames = np.empty((n_samples, n_states))
+    frames, top = np.empty((n_samples, n_states)), np.empty(n_samples)
     for start in range(0, n_samples, step):
         rows = slice(start, start + step)
-        log_prob = log_gaussian_prob_stacked(augmented_columns(X[rows]), *stacked)
-        log_prob -= log_prob.max(axis=0)
-        np.exp(log_prob, out=log_prob)
-        frames[rows] = log_prob.T
+        scaled_densities(factors @ augmented_columns(X[rows]), norms[:, 0], frames[rows], top[rows])
     alpha = np.empty_like(frames)
     forward(
         frames,

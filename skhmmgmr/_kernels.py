@@ -163,16 +163,25 @@ def pairwise_products(columns, rows, cols, out):
             out[p, t] = columns[a, t] * columns[b, t]
 
 
+# Below this, exp() of a log-density difference is subnormal (exp(-708.4) is the smallest
+# normal double): such a frame is set to zero, which changes no sum it enters (every row also
+# holds a frame of exactly one) and avoids the slow subnormal path of exp.
+UNDERFLOW = -708.0
+
+
 @njit(cache=True, nogil=True)
-def scaled_log_densities(projected, norms, frames, top):
-    """Emission log-densities of a chunk, shifted to a maximum of zero per row.
+def scaled_densities(projected, norms, frames, top):
+    """Emission likelihoods of a chunk, scaled to a maximum of one per row.
 
     ``projected`` (n_states * n_features, n_rows) is the product of the stacked factors with the
     chunk's augmented columns (:func:`~skhmmgmr._gaussian.stack_gaussians`): the log-density
     of row ``t`` under state ``k`` is ``norms[k]`` minus the squares of its ``n_features``
-    rows. Writes ``frames[t, k] = log_density[k, t] - top[t]`` (row-major, as the recursions
-    read it) with ``top[t]`` the largest log-density of row ``t``; one pass instead of
-    NumPy's six (square, sum, subtract, max, subtract, transpose).
+    rows. Writes ``top[t]``, the largest log-density of row ``t``, and
+    ``frames[t, k] = exp(log_density[k, t] - top[t])`` (row-major, as the recursions read it).
+    The exponential is only evaluated where it is needed: the largest frame of a row is one,
+    and frames below ``exp(UNDERFLOW)`` are zero. One pass instead of NumPy's seven (square,
+    sum, subtract, max, subtract, exp, transpose), and with few states most of the exp calls
+    are saved.
     """
     n_states = norms.shape[0]
     n_features = projected.shape[0] // n_states
@@ -186,10 +195,15 @@ def scaled_log_densities(projected, norms, frames, top):
                 value = projected[d, t]
                 log_density[k, t] -= value * value
     for t in range(n_rows):
-        top[t] = log_density[0, t]
-    for k in range(1, n_states):
-        for t in range(n_rows):
-            top[t] = max(top[t], log_density[k, t])
-    for t in range(n_rows):
+        largest = log_density[0, t]
+        for k in range(1, n_states):
+            largest = max(largest, log_density[k, t])
+        top[t] = largest
         for k in range(n_states):
-            frames[t, k] = log_density[k, t] - top[t]
+            difference = log_density[k, t] - largest
+            if difference == 0.0:
+                frames[t, k] = 1.0
+            elif difference < UNDERFLOW:
+                frames[t, k] = 0.0
+            else:
+                frames[t, k] = np.exp(difference)

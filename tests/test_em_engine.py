@@ -12,6 +12,7 @@ from skhmmgmr._gaussian import (
     compute_precision_cholesky,
     estimate_log_gaussian_prob,
     gaussians_from_moments,
+    stack_gaussians,
     weighted_moments,
 )
 from skhmmgmr._gmr import (
@@ -20,7 +21,7 @@ from skhmmgmr._gmr import (
     filter_state_probabilities,
     mix_estimates,
 )
-from skhmmgmr._kernels import VECTORISED_STATES, forward
+from skhmmgmr._kernels import UNDERFLOW, VECTORISED_STATES, forward, scaled_densities
 from skhmmgmr._sequences import Recordings
 
 
@@ -190,6 +191,38 @@ def test_moment_sums_by_state_products_and_by_pairs_agree(n_states):
     only.add(respT, columns)
     np.testing.assert_allclose(only.result()[[0, -1]], expected[[0, -1]], rtol=1e-12)
     assert not only.result()[1:-1].any()
+
+
+@pytest.mark.parametrize("n_states", [1, 2, 5])
+def test_scaled_densities_match_exp_of_log_densities(n_states):
+    rng = np.random.default_rng(12)
+    n_features = 3
+    means, covariances = random_gaussians(rng, n_states, n_features)
+    if n_states > 1:
+        means[1] = means[0] + 100.0  # far apart: frames of one state underflow near the other
+    if n_states > 2:
+        means[2], covariances[2] = means[1], covariances[1]  # a tie for the largest frame
+    X = rng.normal(size=(300, n_features))
+    X[:3] = means[0]
+    X[3:6] = means[-1]
+    precisions_chol = compute_precision_cholesky(covariances)
+    factors, norms = stack_gaussians(means, precisions_chol)
+    frames, top = np.empty((300, n_states)), np.empty(300)
+    scaled_densities(factors @ augmented_columns(X), norms[:, 0], frames, top)
+
+    log_prob = np.column_stack(
+        [multivariate_normal(m, c).logpdf(X) for m, c in zip(means, covariances, strict=True)]
+    )
+    np.testing.assert_allclose(top, log_prob.max(axis=1), rtol=1e-12)
+    difference = log_prob - log_prob.max(axis=1, keepdims=True)
+    expected = np.where(difference < UNDERFLOW, 0.0, np.exp(difference))
+    np.testing.assert_allclose(frames, expected, rtol=1e-10, atol=1e-300)
+    assert np.all(frames.max(axis=1) == 1.0)  # exactly one at every row's largest
+    if n_states > 1:
+        assert np.any(difference < UNDERFLOW)  # the underflow branch was exercised
+        assert np.all(frames[difference < UNDERFLOW] == 0.0)
+    if n_states > 2:
+        np.testing.assert_array_equal(frames[:, 1], frames[:, 2])
 
 
 @pytest.mark.parametrize("n_states", [2, VECTORISED_STATES])
