@@ -4,15 +4,20 @@
 a plain implementation of the same algorithm that shares no numerics with the package's:
 emission densities from ``sklearn.mixture`` (Cholesky factors, one pass over all rows per
 state), hmmlearn's compiled scaled forward, backward and expected-transition kernels per
-recording, moments by plain NumPy over all rows, and the k-means start on *all* rows (the
-package clusters a sample of at most 100,000 rows). Everything else (validation,
-standardisation, the causal GMR read-out, the selection logic) is the package's, so that a
-difference between the two framework runs can only come from the fitted HMMs.
+recording, moments by plain NumPy over all rows. The start is the package's algorithm
+written again from public parts: k-means on the same evenly spaced sample of at most 100,000
+rows (same offset, same random state), every row labelled by its nearest centre
+(``sklearn.metrics.pairwise_distances_argmin``), the pooled covariance for a state with too
+few rows, random transitions drawn next from the same random state. Everything else
+(validation, standardisation, the causal GMR read-out, the selection logic) is the package's,
+so that a difference between the two framework runs can only come from the numerics of the
+fitted HMMs.
 """
 
 import numpy as np
 from hmmlearn import _hmmc
 from sklearn.cluster import KMeans
+from sklearn.metrics import pairwise_distances_argmin
 from sklearn.mixture._gaussian_mixture import (
     _compute_precision_cholesky,
     _estimate_log_gaussian_prob,
@@ -20,7 +25,7 @@ from sklearn.mixture._gaussian_mixture import (
 from sklearn.utils import check_random_state
 
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr._em import MIN_STATE_WEIGHT, EMResult, HMMParameters
+from skhmmgmr._em import INIT_SAMPLE_ROWS, MIN_STATE_WEIGHT, EMResult, HMMParameters
 
 
 def _gaussians(resp, X, reg_covar, previous=None):
@@ -39,12 +44,18 @@ def _gaussians(resp, X, reg_covar, previous=None):
 
 
 def _initial_parameters(X, n_states, reg_covar, random_state):
-    labels = KMeans(n_clusters=n_states, n_init=1, random_state=random_state).fit(X).labels_
+    sample = X
+    if len(X) > INIT_SAMPLE_ROWS:
+        step = -(-len(X) // INIT_SAMPLE_ROWS)
+        sample = X[random_state.randint(step) :: step]
+    kmeans = KMeans(n_clusters=n_states, n_init=1, random_state=random_state).fit(sample)
+    labels = pairwise_distances_argmin(X, kmeans.cluster_centers_)
     resp = np.zeros((len(X), n_states))
     resp[np.arange(len(X)), labels] = 1.0
     weights, means, covariances = _gaussians(np.maximum(resp, 1e-300), X, reg_covar)
     pooled = np.cov(X, rowvar=False, bias=True) + reg_covar * np.eye(X.shape[1])
     covariances[weights < X.shape[1] + 1] = pooled
+    means[weights < 1e-12] = X.mean(axis=0)
     startprob = np.full(n_states, 1.0 / n_states)
     transmat = random_state.dirichlet(np.ones(n_states), size=n_states)
     return HMMParameters(startprob, transmat, means, covariances)
@@ -73,7 +84,7 @@ def _e_step(X, bounds, params):
 
 
 def reference_baum_welch(X, bounds, n_states, *, n_iter, tol, reg_covar, random_state):
-    """EM from a k-means start on all rows; returns an :class:`skhmmgmr._em.EMResult`."""
+    """EM from the package's k-means start; returns an :class:`skhmmgmr._em.EMResult`."""
     params = _initial_parameters(X, n_states, reg_covar, check_random_state(random_state))
     history, converged = [], False
     for _ in range(n_iter):

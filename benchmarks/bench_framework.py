@@ -139,10 +139,32 @@ def peer_exhaustive(data, top, n_jobs, per_size=2, seed=0):
     return result
 
 
+def _canonical(subset):
+    # Runs of different versions may order the features of a subset differently.
+    return tuple(sorted(subset))
+
+
 def compare_selections(fast, reference):
     """Every selection of the two runs, side by side; returns a dict of differences."""
     keys = ["trade_off", "recording"]
     labels = list(fast.relevance.columns)
+    fast, reference = (
+        types.SimpleNamespace(
+            **{
+                **vars(report),
+                "exhaustive": report.exhaustive.assign(
+                    subset=report.exhaustive["subset"].map(_canonical)
+                ),
+                "forward_paths": report.forward_paths.assign(
+                    subset=report.forward_paths["subset"].map(_canonical)
+                ),
+                "candidates": report.candidates.assign(
+                    features=report.candidates["features"].map(_canonical)
+                ),
+            }
+        )
+        for report in (fast, reference)
+    )
     best = {
         name: best_per_recording(
             rescore_table(report.exhaustive, "subset", labels), "subset", tie_breaker="n_features"
@@ -174,7 +196,7 @@ def compare_selections(fast, reference):
         "forward_same_final_share": float((forward["fast"] == forward["reference"]).mean()),
         "relevance_max_count_difference": int(relevance_diff.to_numpy().max()),
         "candidates_differing": differing,
-        "same_subset": tuple(fast.features) == tuple(reference.features),
+        "same_subset": _canonical(fast.features) == _canonical(reference.features),
         "same_n_states": fast.n_states == reference.n_states,
         "state_choices_fast": fast.state_choices[["trade_off", "n_states"]].to_dict("list"),
         "state_choices_reference": reference.state_choices[["trade_off", "n_states"]].to_dict(

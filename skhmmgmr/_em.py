@@ -258,49 +258,99 @@ def _raise_impossible():
     )
 
 
-def e_step(engine, params):
-    """Forward-backward over every recording, accumulating the sufficient statistics."""
-    n_states = params.n_states
-    n_columns = engine.data.values.shape[0]
+# The EM keeps the forward pass of all rows (frames and forward variables) and runs the
+# backward pass only once the log-likelihood shows that the M-step is needed, when the two
+# arrays take at most this many values; above, both passes run block by block and the E-step
+# that detects convergence is a full one.
+KEPT_FORWARD_VALUES = 8_000_000
+
+
+def _forward_blocks(engine, params):
+    """Forward pass block by block: ``(block, frames, alpha, scale, log_likelihood)``."""
     stacked = stack_gaussians(params.means, params.precisions_chol, engine.shift)
-    remainder = engine.remainder
-    accumulated = [k for k in range(n_states) if k != remainder]
-    start_counts = np.zeros(n_states)
-    transition_sums = np.zeros((n_states, n_states))
-    sums = MomentSums(n_states, n_columns, states=accumulated)
-    log_likelihood = 0.0
-    for start, stop, rec_starts, rec_stops in engine.blocks:
+    for block in engine.blocks:
+        start, stop, rec_starts, rec_stops = block
         frames, log_scale = engine.frames(stacked, start, stop)
-        n_rows = stop - start
-        alpha, scale = np.empty_like(frames), np.empty(n_rows)
-        if not forward(
-            frames, rec_starts, rec_stops, params.startprob, params.transmat, alpha, scale
-        ):
+        alpha, scale = np.empty_like(frames), np.empty(stop - start)
+        log_likelihood = forward(
+            frames,
+            rec_starts,
+            rec_stops,
+            params.startprob,
+            params.transmat,
+            alpha,
+            scale,
+            lazy=True,
+        )
+        if log_likelihood == -np.inf:
             _raise_impossible()
-        log_likelihood += log_scale + float(np.log(scale).sum())
-        posteriors, weighted = np.empty((n_states, n_rows)), np.empty_like(frames)
+        yield block, frames, alpha, scale, log_scale + log_likelihood
+
+
+class _Expectations:
+    """Backward pass block by block, accumulating the sufficient statistics."""
+
+    def __init__(self, engine, params):
+        self.engine, self.params = engine, params
+        n_states = params.n_states
+        self.accumulated = [k for k in range(n_states) if k != engine.remainder]
+        self.start_counts = np.zeros(n_states)
+        self.transition_sums = np.zeros((n_states, n_states))
+        self.sums = MomentSums(n_states, engine.data.values.shape[0], states=self.accumulated)
+
+    def add(self, block, frames, alpha, scale):
+        (start, stop, rec_starts, rec_stops), n_states = block, self.params.n_states
+        posteriors, weighted = np.empty((n_states, stop - start)), np.empty_like(frames)
         backward_posteriors(
-            frames, rec_starts, rec_stops, params.transmat, alpha, scale, posteriors, weighted
+            frames, rec_starts, rec_stops, self.params.transmat, alpha, scale, posteriors, weighted
         )
         # weighted is zero at every recording's first row: no term crosses recordings.
-        transition_sums += alpha[:-1].T @ weighted[1:]
-        start_counts += posteriors[:, rec_starts].sum(axis=1)
-        for lo, hi, chunk in engine.chunks(start, stop):
-            sums.add(posteriors[:, lo:hi], chunk)
-    moments = sums.result()
-    if remainder is not None:
-        moments[remainder] = engine.totals - moments[accumulated].sum(axis=0)
-    weights, first, second = split_moments(moments)
-    engine.remainder = int(np.argmax(weights))
-    return _Statistics(
-        log_likelihood,
-        start_counts,
-        transition_sums * params.transmat,
-        weights.copy(),
-        first.copy(),
-        second.copy(),
-        engine.shift,
-    )
+        self.transition_sums += alpha[:-1].T @ weighted[1:]
+        self.start_counts += posteriors[:, rec_starts].sum(axis=1)
+        for lo, hi, chunk in self.engine.chunks(start, stop):
+            self.sums.add(posteriors[:, lo:hi], chunk)
+
+    def statistics(self, log_likelihood):
+        engine, remainder = self.engine, self.engine.remainder
+        moments = self.sums.result()
+        if remainder is not None:
+            moments[remainder] = engine.totals - moments[self.accumulated].sum(axis=0)
+        weights, first, second = split_moments(moments)
+        engine.remainder = int(np.argmax(weights))
+        return _Statistics(
+            log_likelihood,
+            self.start_counts,
+            self.transition_sums * self.params.transmat,
+            weights.copy(),
+            first.copy(),
+            second.copy(),
+            engine.shift,
+        )
+
+
+def e_step(engine, params):
+    """Forward-backward over every recording, accumulating the sufficient statistics."""
+    expectations, log_likelihood = _Expectations(engine, params), 0.0
+    for block, frames, alpha, scale, block_log_likelihood in _forward_blocks(engine, params):
+        log_likelihood += block_log_likelihood
+        expectations.add(block, frames, alpha, scale)
+    return expectations.statistics(log_likelihood)
+
+
+def _e_step_unless(engine, params, is_last):
+    """``(log_likelihood, statistics)``; the statistics are None when ``is_last(log_likelihood)``
+    and the forward pass was kept, which saves the backward pass of the final E-step."""
+    if 2 * engine.data.n_samples * params.n_states > KEPT_FORWARD_VALUES:
+        stats = e_step(engine, params)
+        return stats.log_likelihood, stats
+    passes = list(_forward_blocks(engine, params))
+    log_likelihood = float(sum(item[-1] for item in passes))
+    if is_last(log_likelihood):
+        return log_likelihood, None
+    expectations = _Expectations(engine, params)
+    for block, frames, alpha, scale, _ in passes:
+        expectations.add(block, frames, alpha, scale)
+    return log_likelihood, expectations.statistics(log_likelihood)
 
 
 def score_hmm(X, recordings, params):
@@ -309,17 +359,7 @@ def score_hmm(X, recordings, params):
 
 
 def _score(engine, params):
-    stacked = stack_gaussians(params.means, params.precisions_chol, engine.shift)
-    log_likelihood = 0.0
-    for start, stop, rec_starts, rec_stops in engine.blocks:
-        frames, log_scale = engine.frames(stacked, start, stop)
-        alpha, scale = np.empty_like(frames), np.empty(stop - start)
-        if not forward(
-            frames, rec_starts, rec_stops, params.startprob, params.transmat, alpha, scale
-        ):
-            _raise_impossible()
-        log_likelihood += log_scale + float(np.log(scale).sum())
-    return float(log_likelihood)
+    return float(sum(item[-1] for item in _forward_blocks(engine, params)))
 
 
 def m_step(stats, previous, reg_covar):
@@ -441,13 +481,17 @@ def baum_welch(X, recordings, params, *, n_iter, tol, reg_covar, callback=None, 
     history = []
     converged = False
     n_done = 0
+
+    def converges(log_likelihood):
+        return bool(history) and abs(log_likelihood - history[-1]) < tol * n_samples
+
     for n_done in range(1, n_iter + 1):
-        stats = e_step(engine, params)
-        history.append(float(stats.log_likelihood))
+        log_likelihood, stats = _e_step_unless(engine, params, converges)
+        converged = converges(log_likelihood)
+        history.append(log_likelihood)
         if callback is not None:
-            callback(n_done, stats.log_likelihood)
-        if len(history) > 1 and abs(history[-1] - history[-2]) < tol * n_samples:
-            converged = True
+            callback(n_done, log_likelihood)
+        if converged:
             break
         params = m_step(stats, params, reg_covar)
     else:

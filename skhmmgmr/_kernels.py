@@ -11,8 +11,9 @@ Conventions (all kernels):
   consecutive recordings, each row scaled by a positive constant (the caller keeps the
   logarithms of the constants);
 - ``starts`` / ``stops`` are the recording bounds within the block (int64 arrays);
-- the forward variable of a row is normalised to sum to one and its normaliser ``c_t`` kept in
-  ``scale``: the log-likelihood of the block is ``sum_t log c_t`` plus the frame scales;
+- the forward variable of a row is divided by a normaliser ``c_t`` kept in ``scale`` (its sum,
+  so that it sums to one; in training only when needed, see :func:`forward`): the
+  log-likelihood of the block is ``sum_t log c_t`` plus the frame scales;
 - the backward variable is divided by ``c_{t+1}`` at every step, so that the posterior is the
   product of the two.
 
@@ -29,12 +30,18 @@ from numba import njit
 # Number of states from which the vectorised compilations are used.
 VECTORISED_STATES = 8
 
+# The training forward pass (``rescale="lazy"``) rescales a row only when its total falls below
+# this (or at a recording's last row); far above the smallest normal double, so that no state
+# that still matters underflows, and the backward variables stay below 1 / RESCALE_BELOW.
+RESCALE_BELOW = 1e-30
+
 _VECTORISED = {"reassoc", "contract"}
 
 
 @njit(inline="always")
-def _forward_body(frames, starts, stops, startprob, transmat_t, alpha, scale, restart):
+def _forward_body(frames, starts, stops, startprob, transmat_t, alpha, scale, restart, lazy):
     n_states = frames.shape[1]
+    log_likelihood = 0.0
     for r in range(starts.shape[0]):
         lo, hi = starts[r], stops[r]
         for t in range(lo, hi):
@@ -49,18 +56,23 @@ def _forward_body(frames, starts, stops, startprob, transmat_t, alpha, scale, re
                 value = prior * frames[t, j]
                 alpha[t, j] = value
                 total += value
+            if lazy and total >= RESCALE_BELOW and t != hi - 1:
+                # The next row's recursion then does not wait for a division.
+                scale[t] = 1.0
+                continue
             if not total > 0.0:
                 if not restart:
-                    return False
+                    return -np.inf
                 total = 0.0
                 for j in range(n_states):
                     alpha[t, j] = frames[t, j]
                     total += frames[t, j]
             scale[t] = total
+            log_likelihood += np.log(total)
             inverse = 1.0 / total
             for j in range(n_states):
                 alpha[t, j] *= inverse
-    return True
+    return log_likelihood
 
 
 @njit(inline="always")
@@ -89,13 +101,13 @@ def _backward_body(frames, starts, stops, transmat, alpha, scale, posteriors, we
 
 
 @njit(cache=True, nogil=True)
-def _forward_plain(frames, starts, stops, startprob, transmat_t, alpha, scale, restart):
-    return _forward_body(frames, starts, stops, startprob, transmat_t, alpha, scale, restart)
+def _forward_plain(frames, starts, stops, startprob, transmat_t, alpha, scale, restart, lazy):
+    return _forward_body(frames, starts, stops, startprob, transmat_t, alpha, scale, restart, lazy)
 
 
 @njit(cache=True, nogil=True, fastmath=_VECTORISED)
-def _forward_vectorised(frames, starts, stops, startprob, transmat_t, alpha, scale, restart):
-    return _forward_body(frames, starts, stops, startprob, transmat_t, alpha, scale, restart)
+def _forward_vectorised(frames, starts, stops, startprob, transmat_t, alpha, scale, restart, lazy):
+    return _forward_body(frames, starts, stops, startprob, transmat_t, alpha, scale, restart, lazy)
 
 
 @njit(cache=True, nogil=True)
@@ -108,8 +120,8 @@ def _backward_vectorised(frames, starts, stops, transmat, alpha, scale, posterio
     _backward_body(frames, starts, stops, transmat, alpha, scale, posteriors, weighted)
 
 
-def forward(frames, starts, stops, startprob, transmat, alpha, scale, *, restart=False):
-    """Normalised forward variables of every recording of a block.
+def forward(frames, starts, stops, startprob, transmat, alpha, scale, *, restart=False, lazy=False):
+    """Scaled forward variables of every recording of a block.
 
     Parameters
     ----------
@@ -120,23 +132,34 @@ def forward(frames, starts, stops, startprob, transmat, alpha, scale, *, restart
     startprob : ndarray of shape (n_states,)
     transmat : ndarray of shape (n_states, n_states)
     alpha : ndarray of shape (n_rows, n_states)
-        Receives the forward variables (rows sum to one).
+        Receives the forward variables.
     scale : ndarray of shape (n_rows,)
-        Receives the normalisers ``c_t``.
+        Receives the normalisers ``c_t``; the log-likelihood of the block is the sum of their
+        logarithms plus the frame scales.
     restart : bool, default=False
         What to do at a row that no state the transitions allow can explain (every product
         is zero): return False (training: the recording is impossible), or restart the
         recursion at that row from its frame probabilities alone (the causal filter, which
         must give an estimate).
+    lazy : bool, default=False
+        False: every row is normalised to sum to one (the filter reads them as state
+        probabilities). True (training): a row is divided by its total only when the total
+        falls below :data:`RESCALE_BELOW` and at the last row of every recording, ``c_t = 1``
+        elsewhere (no logarithm to take there either). The recursion's dependency chain then
+        holds no division (about twice as fast with few states); the last rows still sum to
+        one, so :func:`backward_posteriors` and the expected transitions are unchanged. Any
+        positive scales give the same posteriors and log-likelihood up to rounding.
 
     Returns
     -------
-    possible : bool
-        False when a row was impossible and ``restart`` is False.
+    log_likelihood : float
+        ``sum_t log c_t``: with the frame scales, the log-likelihood of the block; ``-inf``
+        when a row was impossible and ``restart`` is False (with restarts, the sum is not a
+        likelihood).
     """
     kernel = _forward_vectorised if frames.shape[1] >= VECTORISED_STATES else _forward_plain
     transmat_t = np.ascontiguousarray(transmat.T)
-    return kernel(frames, starts, stops, startprob, transmat_t, alpha, scale, restart)
+    return kernel(frames, starts, stops, startprob, transmat_t, alpha, scale, restart, lazy)
 
 
 def backward_posteriors(frames, starts, stops, transmat, alpha, scale, posteriors, weighted):

@@ -7,6 +7,7 @@ dask's), can be cached with :class:`joblib.Memory`, and come back as one tidy ta
 per (model, validation recording).
 """
 
+import contextvars
 import numbers
 import os
 import tempfile
@@ -32,6 +33,28 @@ from .estimator import HMMGMRRegressor
 from .metrics import evaluate_recordings, normalize_performance
 
 METRICS = ["rmse", "accuracy", "smoothness"]
+
+# Evaluations shared between the search steps of one framework run (see shared_evaluations).
+_SHARED_EVALUATIONS = contextvars.ContextVar("skhmmgmr_shared_evaluations", default=None)
+
+
+@contextmanager
+def shared_evaluations():
+    """Within this block, a feature subset evaluated by one search step is not refitted by
+    another.
+
+    A model is reused when the estimator, the training and validation recordings (``y``,
+    ``groups`` and the splits), the sampling period and the subset's feature *names*, in the
+    same order, are the same; the feature columns themselves are identified by their names,
+    so the block must only hold searches over one data table (as in
+    :func:`~skhmmgmr.select_parameters`, whose forward step meets many subsets of the top
+    features that its exhaustive step has already evaluated).
+    """
+    token = _SHARED_EVALUATIONS.set({})
+    try:
+        yield
+    finally:
+        _SHARED_EVALUATIONS.reset(token)
 
 
 # --------------------------------------------------------------------------------------------
@@ -485,24 +508,48 @@ class RecordingSearchMixin:
 
     def _evaluate(self, X, y, groups, splits, subsets, desc):
         estimator = default_estimator() if self.estimator is None else self.estimator
+        names = self._names()
+        subset_names = [tuple(names[list(s)]) for s in subsets]
+        shared = _SHARED_EVALUATIONS.get()
+        context = known = None
+        if shared is not None and hasattr(self, "feature_names_in_"):
+            context = joblib.hash((clone(estimator), y, groups, splits, self.sampling_period))
+            known = {
+                i: shared[context, key]
+                for i, key in enumerate(subset_names)
+                if (context, key) in shared
+            }
+        todo = [i for i in range(len(subsets)) if not known or i not in known]
         table = evaluate_models(
             estimator,
             X,
             y,
             groups,
             splits,
-            [(subset, {}) for subset in subsets],
+            [(subsets[i], {}) for i in todo],
             sampling_period=self.sampling_period,
             n_jobs=self.n_jobs,
             memory=self.memory,
             verbose=self.verbose,
             desc=desc,
         )
-        names = self._names()
-        subset_names = [tuple(names[list(s)]) for s in subsets]
+        if known is not None:
+            table = self._merge_shared(table, todo, known, shared, context, subset_names)
         table.insert(1, "subset", [subset_names[i] for i in table["model"]])
         table.insert(2, "n_features", [len(subsets[i]) for i in table["model"]])
         return table.drop(columns="model")
+
+    @staticmethod
+    def _merge_shared(table, todo, known, shared, context, subset_names):
+        """The new evaluations (``model`` indexes ``todo``) stored in ``shared``, and the
+        table of all subsets in their order, the known ones included."""
+        pieces = {todo[m]: piece.drop(columns="model") for m, piece in table.groupby("model")}
+        shared.update({(context, subset_names[i]): piece for i, piece in pieces.items()})
+        pieces.update(known)
+        if not pieces:
+            return table
+        merged = pd.concat([pieces[i].assign(model=i) for i in sorted(pieces)], ignore_index=True)
+        return merged[["model", *[c for c in merged.columns if c != "model"]]]
 
     def _get_support_mask(self):
         check_is_fitted(self, "support_")

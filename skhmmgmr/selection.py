@@ -36,6 +36,7 @@ from ._search import (
     one_way_anova,
     rescore_table,
     sampling_period_of,
+    shared_evaluations,
     split_recordings_table,
 )
 from .datasets._schema import TARGET
@@ -433,14 +434,17 @@ def select_parameters(
     top = list(filter_table.loc[filter_table["selected"], "feature"])
     lap("filter")
 
-    exhaustive = ExhaustiveFeatureSelector(estimator, max_features=max_subset_size, **common)
-    exhaustive.fit(X_s[top], y_s, g_s)
-    lap("exhaustive")
-    forward = ForwardFeatureSelector(
-        estimator, mode="per_recording", tol=tol, trade_offs=labels, **common
-    )
-    forward.fit(X_s, y_s, g_s)
-    lap("forward")
+    # The top features in table order, as the forward step orders every subset: the subsets
+    # of the top features that the forward step meets are then the exhaustive step's models.
+    with shared_evaluations():
+        exhaustive = ExhaustiveFeatureSelector(estimator, max_features=max_subset_size, **common)
+        exhaustive.fit(X_s[[c for c in X.columns if c in top]], y_s, g_s)
+        lap("exhaustive")
+        forward = ForwardFeatureSelector(
+            estimator, mode="per_recording", tol=tol, trade_offs=labels, **common
+        )
+        forward.fit(X_s, y_s, g_s)
+        lap("forward")
 
     relevance_one = feature_relevance(exhaustive, labels, features=list(X.columns))
     relevance_two = feature_relevance(forward, labels, features=list(X.columns))

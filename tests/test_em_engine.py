@@ -5,6 +5,7 @@ import pytest
 from scipy.special import logsumexp
 from scipy.stats import multivariate_normal
 
+from skhmmgmr import _em
 from skhmmgmr._em import HMMParameters, _blocks, _Engine, e_step, initialize_parameters
 from skhmmgmr._gaussian import (
     MomentSums,
@@ -21,7 +22,13 @@ from skhmmgmr._gmr import (
     filter_state_probabilities,
     mix_estimates,
 )
-from skhmmgmr._kernels import UNDERFLOW, VECTORISED_STATES, forward, scaled_densities
+from skhmmgmr._kernels import (
+    RESCALE_BELOW,
+    UNDERFLOW,
+    VECTORISED_STATES,
+    forward,
+    scaled_densities,
+)
 from skhmmgmr._sequences import Recordings
 
 
@@ -237,8 +244,10 @@ def test_forward_kernel_matches_plain_loop_and_restarts(n_states):
     frames[25, 0] = 1.0  # row 25 fits state 0 only: impossible after row 24
     starts, stops = np.array([0, 10]), np.array([10, 40])
     alpha, scale = np.empty_like(frames), np.empty(40)
-    assert not forward(frames, starts, stops, startprob, transmat, alpha, scale)
-    assert forward(frames, starts, stops, startprob, transmat, alpha, scale, restart=True)
+    assert forward(frames, starts, stops, startprob, transmat, alpha, scale) == -np.inf
+    assert np.isfinite(
+        forward(frames, starts, stops, startprob, transmat, alpha, scale, restart=True)
+    )
     expected = np.empty_like(frames)
     for lo, hi in zip(starts, stops, strict=True):
         prior = startprob
@@ -250,6 +259,40 @@ def test_forward_kernel_matches_plain_loop_and_restarts(n_states):
             prior = expected[t] @ transmat
     np.testing.assert_allclose(alpha, expected, rtol=1e-13)
     assert alpha[25, 0] == 1.0
+
+
+@pytest.mark.parametrize("n_states", [2, VECTORISED_STATES])
+def test_lazy_forward_rows_are_proportional_and_last_rows_normalised(n_states):
+    rng = np.random.default_rng(11)
+    # Small frames: a row's total falls below RESCALE_BELOW every few dozen rows.
+    frames = rng.uniform(0.01, 0.1, size=(1500, n_states))
+    transmat = rng.dirichlet(np.ones(n_states), size=n_states)
+    startprob = rng.dirichlet(np.ones(n_states))
+    starts, stops = np.array([0, 7, 800]), np.array([7, 800, 1500])
+    alpha, scale = np.empty_like(frames), np.empty(1500)
+    log_likelihood = forward(frames, starts, stops, startprob, transmat, alpha, scale)
+    assert log_likelihood == pytest.approx(np.log(scale).sum(), rel=1e-13)
+    lazy_alpha, lazy_scale = np.empty_like(frames), np.empty(1500)
+    lazy_log_likelihood = forward(
+        frames, starts, stops, startprob, transmat, lazy_alpha, lazy_scale, lazy=True
+    )
+    assert lazy_log_likelihood == pytest.approx(log_likelihood, rel=1e-13)
+
+    rescaled = lazy_scale != 1.0
+    assert 10 < rescaled.sum() < 200  # rescaled only now and then
+    assert rescaled[stops - 1].all()
+    assert np.all(lazy_alpha.sum(axis=1)[rescaled] == pytest.approx(1.0, rel=1e-14))
+    assert np.all(lazy_alpha.sum(axis=1) >= RESCALE_BELOW)
+    np.testing.assert_allclose(
+        lazy_alpha / lazy_alpha.sum(axis=1, keepdims=True), alpha, rtol=1e-12
+    )
+    for lo, hi in zip(starts, stops, strict=True):
+        assert np.log(lazy_scale[lo:hi]).sum() == pytest.approx(
+            np.log(scale[lo:hi]).sum(), rel=1e-13
+        )
+    frames[900] = 0.0  # an impossible row is still detected
+    impossible = forward(frames, starts, stops, startprob, transmat, alpha, scale, lazy=True)
+    assert impossible == -np.inf
 
 
 def test_e_step_statistics_do_not_depend_on_chunking():
@@ -267,6 +310,39 @@ def test_e_step_statistics_do_not_depend_on_chunking():
             np.testing.assert_allclose(
                 getattr(stats, name), getattr(reference, name), rtol=1e-11, atol=1e-10
             )
+
+
+def test_kept_forward_pass_gives_the_same_em_as_full_e_steps(monkeypatch):
+    rng = np.random.default_rng(8)
+    X = np.vstack([rng.normal(loc=c, size=(700, 3)) for c in (-2, 0, 2)])
+    recordings = random_recordings(rng, np.array([900, 1200]))
+    start = initialize_parameters(X, recordings, 3, "kmeans", 1e-6, np.random.RandomState(0))
+    calls = []
+
+    def run():
+        calls.clear()
+        return _em.baum_welch(
+            X,
+            recordings,
+            start,
+            n_iter=100,
+            tol=1e-3,
+            reg_covar=1e-6,
+            callback=lambda n, ll: calls.append(n),
+        )
+
+    kept = run()
+    assert kept.converged and kept.n_iter == len(calls) > 2
+    monkeypatch.setattr(_em, "KEPT_FORWARD_VALUES", 0)
+    full = run()
+    assert (full.n_iter, full.converged) == (kept.n_iter, kept.converged)
+    np.testing.assert_allclose(full.history, kept.history, rtol=1e-14)
+    for name in ("startprob", "transmat", "means", "covariances"):
+        np.testing.assert_allclose(getattr(full.parameters, name), getattr(kept.parameters, name))
+    # history[-1] is the log-likelihood of the returned parameters
+    assert kept.history[-1] == pytest.approx(
+        _em.score_hmm(X, recordings, kept.parameters), rel=1e-13
+    )
 
 
 def test_kmeans_initialisation_is_reproducible_with_thread_limits():

@@ -14,7 +14,7 @@ from sklearn.pipeline import make_pipeline
 from threadpoolctl import threadpool_limits
 
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr._search import ForwardPath
+from skhmmgmr._search import ForwardPath, shared_evaluations
 from skhmmgmr.feature_selection import (
     ExhaustiveFeatureSelector,
     ForwardFeatureSelector,
@@ -298,3 +298,34 @@ def test_sklearn_sequential_feature_selector_with_routed_groups(data):
             for j in range(X.shape[1])
         }
     assert max(first, key=first.get) == 0
+
+
+def test_shared_evaluations_reuse_subsets_across_steps_with_the_same_results(data):
+    X, y, groups, cv = data
+    estimator = CountingRegressor(n_states=2, random_state=0)
+    params = dict(cv=cv, sampling_period=PERIOD)
+    forward_params = dict(mode="per_recording", trade_offs=["0/100"], **params)
+    FITS.clear()
+    alone = ForwardFeatureSelector(estimator, **forward_params).fit(X, y, groups=groups)
+    fits_alone = len(FITS)
+    with shared_evaluations():
+        first = ExhaustiveFeatureSelector(estimator, max_features=2, **params)
+        first.fit(X[["f0", "f2", "f3"]], y, groups=groups)
+        FITS.clear()
+        shared = ForwardFeatureSelector(estimator, **forward_params).fit(X, y, groups=groups)
+    known = set(first.results_["subset"])
+    met = set(alone.results_["subset"])
+    assert met & known  # the forward step meets subsets of the exhaustive step
+    assert len(FITS) == fits_alone - len(met & known)
+    pd.testing.assert_frame_equal(shared.results_, alone.results_, check_exact=True)
+    pd.testing.assert_frame_equal(shared.paths_, alone.paths_)
+    # another estimator, or data outside the block, is fitted again
+    with shared_evaluations():
+        ExhaustiveFeatureSelector(estimator, max_features=1, **params).fit(X, y, groups=groups)
+        FITS.clear()
+        other = clone(estimator).set_params(n_states=3)
+        ExhaustiveFeatureSelector(other, max_features=1, **params).fit(X, y, groups=groups)
+        assert len(FITS) == 4
+    FITS.clear()
+    ExhaustiveFeatureSelector(estimator, max_features=1, **params).fit(X, y, groups=groups)
+    assert len(FITS) == 4
