@@ -1,8 +1,8 @@
 """Peak resident memory of ``HMMGMRRegressor.fit`` on a large data set.
 
 Fits K=5 on 2.5 million rows x 18 inputs + torque (the issue's size) in a fresh process and
-reports the peak resident set size (``ru_maxrss``), next to the resident size once the data
-exist (the user's ``X`` and ``y``, 380 MB) so that the fit's own share is visible. Run::
+reports the peak resident set size of that process (``VmHWM``), next to the resident size once
+the data exist (the user's ``X`` and ``y``, 380 MB) so that the fit's own share is visible. Run::
 
     python benchmarks/bench_memory.py                  # 2.5M rows, about a minute
     python benchmarks/bench_memory.py --rows 500000    # quick check
@@ -15,12 +15,25 @@ import subprocess
 import sys
 
 
-def _resident_mb():
+def _status_mb(key):
     with open("/proc/self/status") as status:
         for line in status:
-            if line.startswith("VmRSS:"):
+            if line.startswith(f"{key}:"):
                 return int(line.split()[1]) / 1024
     return float("nan")
+
+
+def _peak_mb():
+    """Peak resident size of this process's own address space.
+
+    Not ``ru_maxrss``: a child started by vfork + exec (as ``subprocess`` does) inherits in it
+    the peak of its parent's address space, so a benchmark run after a large job would report
+    the parent's peak instead of the fit's.
+    """
+    try:
+        return _status_mb("VmHWM")
+    except OSError:  # no /proc: not Linux
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def child(rows, n_inputs, n_states):
@@ -33,12 +46,12 @@ def child(rows, n_inputs, n_states):
 
     X, y, bounds = make_recordings(rows, 84 * max(rows // 500_000, 1), n_inputs, seed=0)
     groups = np.repeat(np.arange(len(bounds) - 1), np.diff(bounds))
-    with_data = _resident_mb()
+    with_data = _status_mb("VmRSS")
     start = time.perf_counter()
     model = HMMGMRRegressor(n_states=n_states, n_iter=10, tol=0.0, random_state=0)
     model.fit(X, y, groups=groups)
     seconds = time.perf_counter() - start
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    peak = _peak_mb()
     data_mb = (X.nbytes + y.nbytes + groups.nbytes) / 2**20
     print(
         json.dumps(

@@ -13,8 +13,9 @@ block, a block holding whole consecutive recordings of about one cache-sized chu
    underflow);
 2. the compiled forward and backward recursions (:mod:`skhmmgmr._kernels`), which also give
    the posteriors and the terms of the expected transitions;
-3. the expected transitions as one product, and the weighted moments as one symmetric product
-   per state, while the block's rows are still in cache.
+3. the expected transitions as one product, and the weighted moments of all states as one
+   product of the posteriors with the pairwise products of the columns
+   (:class:`~skhmmgmr._gaussian.MomentSums`), while the block's rows are still in cache.
 
 An iteration reads the data once and holds no array of the size of the data besides the
 posteriors of one block. The moments of one state (the heaviest of the previous E-step) are
@@ -245,8 +246,8 @@ class _Engine:
         if self._totals is None:
             n_columns = self.data.values.shape[0]
             sums = MomentSums(1, n_columns)
-            for lo, hi, chunk in self.chunks():
-                sums.add(np.ones((1, hi - lo)), chunk)
+            for lo, hi, _ in self.chunks():
+                sums.add(np.ones((1, hi - lo)), self.data.values, lo)
             self._totals = sums.result()[0]
         return self._totals
 
@@ -307,8 +308,8 @@ class _Expectations:
         # weighted is zero at every recording's first row: no term crosses recordings.
         self.transition_sums += alpha[:-1].T @ weighted[1:]
         self.start_counts += posteriors[:, rec_starts].sum(axis=1)
-        for lo, hi, chunk in self.engine.chunks(start, stop):
-            self.sums.add(posteriors[:, lo:hi], chunk)
+        for lo, hi, _ in self.engine.chunks(start, stop):
+            self.sums.add(posteriors[:, lo:hi], self.engine.data.values, start + lo)
 
     def statistics(self, log_likelihood):
         engine, remainder = self.engine, self.engine.remainder
@@ -407,7 +408,7 @@ def _initial_moments(engine, n_states, responsibilities):
     for every chunk of rows, state-major."""
     sums = MomentSums(n_states, engine.data.values.shape[0])
     for lo, hi, chunk in engine.chunks():
-        sums.add(responsibilities(lo, hi, chunk), chunk)
+        sums.add(responsibilities(lo, hi, chunk), engine.data.values, lo)
     return split_moments(sums.result())
 
 

@@ -8,6 +8,7 @@ from scipy.stats import multivariate_normal
 from skhmmgmr import _em
 from skhmmgmr._em import HMMParameters, _blocks, _Engine, e_step, initialize_parameters
 from skhmmgmr._gaussian import (
+    PAIR_BUFFER_VALUES,
     MomentSums,
     augmented_columns,
     compute_precision_cholesky,
@@ -184,20 +185,37 @@ def test_heaviest_state_from_totals_matches_full_accumulation():
 
 
 @pytest.mark.parametrize("n_states", [2, 6, 12])
-def test_moment_sums_by_state_products_and_by_pairs_agree(n_states):
+@pytest.mark.parametrize(
+    ("method", "sub_chunk"), [("syrk", None), ("pairs", None), ("pairs", 64), ("pairs", 1)]
+)
+def test_moment_sums_match_a_plain_sum(n_states, method, sub_chunk):
     rng = np.random.default_rng(9)
     columns = augmented_columns(rng.normal(size=(500, 5)))
     respT = rng.dirichlet(np.ones(n_states), size=500).T.copy()
-    sums = MomentSums(n_states, 6)
+    sums = MomentSums(n_states, 6, method=method, sub_chunk=sub_chunk)
+    # chunks that are not multiples of the sub-chunk, one shorter than it, given as a view or
+    # by their first row in the whole array
     sums.add(respT[:, :200], columns[:, :200])
-    sums.add(respT[:, 200:], columns[:, 200:])
-    assert sums.use_pairs == (n_states >= 6)
+    sums.add(respT[:, 200:230], columns, 200)
+    sums.add(respT[:, 230:], columns, 230)
     expected = np.einsum("kt,at,bt->kab", respT, columns, columns)
     np.testing.assert_allclose(sums.result(), expected, rtol=1e-12, atol=1e-12)
-    only = MomentSums(n_states, 6, states=[0, n_states - 1])
+    only = MomentSums(n_states, 6, states=[0, n_states - 1], method=method, sub_chunk=sub_chunk)
     only.add(respT, columns)
     np.testing.assert_allclose(only.result()[[0, -1]], expected[[0, -1]], rtol=1e-12)
     assert not only.result()[1:-1].any()
+
+
+def test_moment_sums_choose_syrk_only_for_one_state_over_many_columns():
+    assert MomentSums(2, 10, states=[1]).method == "syrk"
+    assert MomentSums(2, 5, states=[1]).method == "pairs"
+    assert MomentSums(3, 20, states=[0, 2]).method == "pairs"
+    assert MomentSums(1, 20).method == "syrk"
+    # sub-chunks of pairwise products stay within the cache-sized buffer
+    sums = MomentSums(5, 20)
+    assert sums.sub_chunk * 20 * 21 // 2 <= PAIR_BUFFER_VALUES
+    with pytest.raises(ValueError, match="method"):
+        MomentSums(2, 3, method="einsum")
 
 
 @pytest.mark.parametrize("n_states", [1, 2, 5])
