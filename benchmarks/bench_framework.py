@@ -18,8 +18,8 @@ validation recordings (504,000 and 252,000 rows), 18 measured features.
 
 Run::
 
-    python benchmarks/bench_framework.py                   # all three, about 30 minutes
-    python benchmarks/bench_framework.py --skip-reference  # fast path and peer, ~12 minutes
+    python benchmarks/bench_framework.py                   # all three, about 45 minutes
+    python benchmarks/bench_framework.py --skip-reference  # fast path and peer, ~10 minutes
 """
 
 import argparse

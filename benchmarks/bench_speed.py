@@ -16,9 +16,12 @@ Runs, one after the other on this machine:
 Run from the repository root, with the ``bench`` extra installed (``pip install -e
 ".[bench]"``)::
 
-    python benchmarks/bench_speed.py                        # about 40 minutes on 2 cores
-    python benchmarks/bench_speed.py --skip-reference       # about 15 minutes
+    python benchmarks/bench_speed.py                        # about 50 minutes on 2 cores
+    python benchmarks/bench_speed.py --skip-reference       # about 12 minutes
     python benchmarks/bench_speed.py --output results.json  # also write the figures
+    python benchmarks/bench_speed.py --save tables          # keep both paths' selection tables
+    python benchmarks/bench_speed.py --reference-tables tables/reference_path.joblib
+                                                # compare with a saved reference run, ~12 min
 
 Timings are only meaningful on an otherwise idle machine.
 """
