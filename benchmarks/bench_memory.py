@@ -31,9 +31,12 @@ def _peak_mb():
     the parent's peak instead of the fit's.
     """
     try:
-        return _status_mb("VmHWM")
+        peak = _status_mb("VmHWM")
     except OSError:  # no /proc: not Linux
-        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        peak = float("nan")
+    if peak != peak:  # no VmHWM line either
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return peak
 
 
 def child(rows, n_inputs, n_states):

@@ -212,7 +212,10 @@ class MomentSums:
         ``columns[:, first : first + n_rows]`` of augmented columns."""
         n_rows = respT.shape[1]
         if self.method == "pairs":
-            self._add_pairs(respT, np.ascontiguousarray(columns), first, n_rows)
+            if not columns.flags.c_contiguous:
+                # the kernel needs C-contiguous rows: copy this chunk only, never the whole array
+                columns, first = np.ascontiguousarray(columns[:, first : first + n_rows]), 0
+            self._add_pairs(respT, columns, first, n_rows)
             return
         chunk = columns[:, first : first + n_rows]
         for k in self.states:
