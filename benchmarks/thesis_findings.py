@@ -7,10 +7,11 @@ against the 18-feature baseline with the same K, how much smoother the final mod
 accuracy and smoothness against K on the validation recordings (the thesis: more states raise
 accuracy and lower smoothness, i.e. a rougher estimate) and the wall time.
 
-Run: ``python benchmarks/thesis_findings.py`` (reduced scale, a few minutes per run on 2 cores)
-or ``python benchmarks/thesis_findings.py --full`` (thesis protocol: 5-minute sections at 100 Hz,
-12/6/6 sections per driver, 10 filtered features, K up to 20). ``--sensor-noise none`` runs on
-the clean simulator states for comparison.
+Run: ``python benchmarks/thesis_findings.py`` (reduced scale: 1-minute sections, K up to 8; a
+few minutes per run on 2 cores) or ``python benchmarks/thesis_findings.py --full`` (thesis
+protocol: 5-minute sections, 12/6/6 sections per driver, 10 filtered features, K up to 20). Both
+scales sample at 20 Hz (``sampling_rate`` in ``REDUCED`` and ``FULL``). ``--sensor-noise none``
+runs on the clean simulator states for comparison.
 """
 
 import argparse

@@ -289,7 +289,8 @@ def weighted_moments(resp, X, shift=None, chunk_size=None):
 def gaussians_from_moments(weights, first, second, reg_covar, shift=None):
     """Means and covariances (with ``reg_covar`` on the diagonal) from raw moments.
 
-    ``weights`` must be strictly positive. The covariance is ``E[x x^T] - E[x] E[x]^T`` about
+    ``reg_covar`` is one value for every state or an array of shape (n_states,), one per
+    state. ``weights`` must be strictly positive. The covariance is ``E[x x^T] - E[x] E[x]^T`` about
     the shift point; with the shift near the data (the engine uses the data mean, and the
     estimator standardises the data) the subtraction loses no significant digits.
     """
@@ -299,6 +300,7 @@ def gaussians_from_moments(weights, first, second, reg_covar, shift=None):
     covariances -= centred_means[:, :, np.newaxis] * centred_means[:, np.newaxis, :]
     covariances += covariances.transpose(0, 2, 1)
     covariances *= 0.5
-    covariances.reshape(covariances.shape[0], -1)[:, :: n_features + 1] += reg_covar
+    diagonals = covariances.reshape(covariances.shape[0], -1)[:, :: n_features + 1]
+    diagonals += np.reshape(np.asarray(reg_covar, dtype=float), (-1, 1))
     means = centred_means if shift is None else centred_means + shift
     return means, covariances

@@ -24,11 +24,15 @@ MAX_ROWS = 25
 TABLES = {
     "test_summary": ("Test set: final model against the all-feature baseline (means)", True),
     "per_driver": ("Test set per driver (means over the driver's test recordings)", True),
-    "candidates": ("Candidate subsets (Strict/Mild/Liberal 1-3) on validation, K=2", True),
+    "candidates": (
+        "Candidate subsets (Strict/Mild/Liberal 1-3) on validation, K=2; an empty candidate is "
+        "listed but not compared",
+        True,
+    ),
     "state_choices": ("Number of states chosen by both 1% rules, per trade-off", True),
     "filter": ("Spearman filter on the training recordings", True),
     "relevance": ("Feature relevance: counts in the per-recording best subsets", True),
-    "anova": ("One-way ANOVAs", True),
+    "anova": ("One-way ANOVAs in the thesis' scope (Appendix E.1.2-E.1.4)", True),
     "bic": ("BIC of every K on the training recordings", True),
     "states": ("State selection: every K on every validation recording", False),
     "test": ("Test set: every recording", True),
@@ -135,7 +139,7 @@ def report_figures(report, data, *, sampling_period):
 
 def _cell(value):
     if isinstance(value, tuple):
-        return ", ".join(map(str, value))
+        return ", ".join(map(str, value)) if value else "(empty)"
     return value
 
 

@@ -280,12 +280,14 @@ def one_way_anova(table, *, by, values):
     """One-way ANOVA (:func:`scipy.stats.f_oneway`) of each ``values`` column across ``by``.
 
     Each group holds the rows (recordings) of one level of ``by``; the test asks whether the
-    group means differ. Returns one row per value column: ``F``, ``pvalue``, ``n_groups``.
+    group means differ. Returns one row per value column: ``F``, ``pvalue``, ``n_groups`` and
+    ``groups`` (tuple of the levels entered, in order of appearance).
     """
     rows = []
     for column in [values] if isinstance(values, str) else values:
-        samples = [g[column].to_numpy(float) for _, g in table.groupby(by, sort=False)]
-        samples = [s for s in samples if s.size]
+        parts = [(level, g[column].to_numpy(float)) for level, g in table.groupby(by, sort=False)]
+        parts = [(level, s) for level, s in parts if s.size]
+        samples = [s for _, s in parts]
         statistic, pvalue = np.nan, np.nan
         if len(samples) > 1 and any(np.ptp(s) > 0 for s in samples):
             with warnings.catch_warnings():
@@ -297,6 +299,7 @@ def one_way_anova(table, *, by, values):
                 "F": float(statistic),
                 "pvalue": float(pvalue),
                 "n_groups": len(samples),
+                "groups": tuple(level for level, _ in parts),
             }
         )
     return pd.DataFrame(rows)

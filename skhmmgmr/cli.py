@@ -5,6 +5,7 @@ traceback and end with exit code 2.
 """
 
 import argparse
+import inspect
 import sys
 import time
 from pathlib import Path
@@ -19,6 +20,24 @@ from .datasets._schema import META_COLUMNS
 
 class CommandError(Exception):
     """A user-facing error: printed without a traceback, exit code 2."""
+
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Every option's help ends with its default, unless it states it (as options whose
+    default is None, decided at run time, do)."""
+
+    def _get_help_string(self, action):
+        if action.default is None or "(default" in (action.help or ""):
+            return action.help
+        return super()._get_help_string(action)
+
+
+def _framework_defaults():
+    """Defaults of :func:`~skhmmgmr.select_parameters`: ``select`` uses and shows them."""
+    from .selection import select_parameters
+
+    parameters = inspect.signature(select_parameters).parameters
+    return {name: parameter.default for name, parameter in parameters.items()}
 
 
 def _log(args, message):
@@ -68,6 +87,11 @@ DEMO_SCALES = {
     "default": dict(duration=20.0, n_top=6, k_max=8, trade_off_step=25),
     "full": dict(duration=300.0, n_top=10, k_max=20, trade_off_step=10),
 }
+
+
+def _demo_default(name):
+    default, full = DEMO_SCALES["default"][name], DEMO_SCALES["full"][name]
+    return f"(default: {default:g}; --full: {full:g})"
 
 
 def _progress(args, total, desc):
@@ -131,6 +155,7 @@ def _run_framework(args, data, meta):
         "trade-off": report.trade_off,
         "filter / K range": f"top {args.n_top} features, K = 1..{args.k_max}",
         "relevance trade-offs": ", ".join(relevance_trade_offs),
+        "empty candidate subsets": ", ".join(report.empty_candidates) or "none",
         "seed": args.seed,
         "n_jobs": args.n_jobs,
         **{f"time: {k} [s]": f"{v:.1f}" for k, v in timings.items()},
@@ -145,6 +170,8 @@ def _run_framework(args, data, meta):
     bar.close()
     columns = ["rmse", "accuracy", "smoothness", "performance_score", "n_features", "n_states"]
     print(f"selected features: {', '.join(report.features)}; K = {report.n_states}")
+    if report.empty_candidates:
+        print(f"empty candidate subsets (not compared): {', '.join(report.empty_candidates)}")
     print(report.test_summary.set_index("model")[columns].round(3).to_string())
     print(per_driver.set_index(["driver", "model"]).round(3).to_string())
     _log(args, f"Wrote {page} ({timings['total']:.1f} s)")
@@ -343,107 +370,112 @@ def command_predict(args):
 
 
 def _add_data_options(parser):
-    parser.add_argument("--target", default=TARGET, help="target column (default: %(default)s)")
-    parser.add_argument(
-        "--recording", default=RECORDING, help="recording-id column (default: %(default)s)"
-    )
-    parser.add_argument("--time", default=TIME, help="time column (default: %(default)s)")
+    parser.add_argument("--target", default=TARGET, help="target column")
+    parser.add_argument("--recording", default=RECORDING, help="recording-id column")
+    parser.add_argument("--time", default=TIME, help="time column")
 
 
-def _add_framework_options(parser, *, n_top=None, k_max=None, trade_off_step=None):
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+def _add_framework_options(parser, defaults=None):
+    """Options of ``demo`` and ``select``; ``defaults=None``: the demo's scale decides."""
+    framework = _framework_defaults()
+    parser.add_argument("--seed", type=int, default=0, help="random seed")
     parser.add_argument(
-        "--n-jobs", type=int, default=-1, help="parallel fits, joblib (default: all cores)"
+        "--n-jobs", type=int, default=-1, help="parallel fits with joblib; -1: all cores"
     )
-    parser.add_argument(
-        "--output", default="skhmmgmr_report", help="report folder (default: %(default)s)"
-    )
-    parser.add_argument(
-        "--trade-off", default="50/50", help="accuracy/smoothness weights of every choice"
-    )
-    parser.add_argument("--n-top", type=int, default=n_top, help="features kept by the filter")
-    parser.add_argument("--k-max", type=int, default=k_max, help="largest number of states")
-    parser.add_argument(
-        "--trade-off-step", type=int, default=trade_off_step, help="relevance trade-off step [%%]"
-    )
+    parser.add_argument("--output", default="skhmmgmr_report", help="report folder")
+    text = "accuracy/smoothness weights of every choice"
+    parser.add_argument("--trade-off", default=framework["trade_off"], help=text)
+    helps = {
+        "n_top": "features kept by the filter",
+        "k_max": "largest number of states",
+        "trade_off_step": "step of the trade-offs mapped by the relevance [%%]",
+    }
+    for name, text in helps.items():
+        if defaults is None:
+            default, text = None, f"{text} {_demo_default(name)}"
+        else:
+            default = defaults[name]
+        parser.add_argument(f"--{name.replace('_', '-')}", type=int, default=default, help=text)
 
 
 def build_parser():
+    description = "HMM-GMR driver steering-torque models."
     parser = argparse.ArgumentParser(
-        prog="skhmmgmr", description="HMM-GMR driver steering-torque models."
+        "skhmmgmr", description=description, formatter_class=_HelpFormatter
     )
     parser.add_argument("--quiet", action="store_true", help="print results only")
     sub = parser.add_subparsers(dest="command", required=True)
     quiet = argparse.ArgumentParser(add_help=False)
     # SUPPRESS keeps a --quiet given before the sub-command
-    quiet.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS)
+    text = "print results only (default: False)"
+    quiet.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=text)
+    common = dict(parents=[quiet], formatter_class=_HelpFormatter)
 
     demo = sub.add_parser(
         "demo",
-        parents=[quiet],
         help="run the whole framework on simulated drivers and write a report",
         description="Simulate the thesis' protocol for several virtual drivers, select the "
         "features and K, compare the final model with the all-feature baseline on the test "
         "sections, and write an HTML report with its tables and figures.",
+        **common,
     )
     demo.add_argument(
         "--full", action="store_true", help="thesis scale: 5-minute sections, top 10, K<=20"
     )
+    drivers = ["defensive", "aggressive", "novice"]
+    demo.add_argument("--drivers", nargs="+", default=drivers, help="driver styles")
     demo.add_argument(
-        "--drivers",
-        nargs="+",
-        default=["defensive", "aggressive", "novice"],
-        help="driver styles (default: %(default)s)",
+        "--duration", type=float, help=f"section length [s] {_demo_default('duration')}"
     )
-    demo.add_argument(
-        "--duration", type=float, help="section length [s] (default: 20; --full: 300)"
-    )
-    demo.add_argument(
-        "--sampling-rate", type=float, default=20.0, help="logging rate [Hz] (default: 20)"
-    )
+    demo.add_argument("--sampling-rate", type=float, default=20.0, help="logging rate [Hz]")
     demo.add_argument("--features", nargs="+", help="candidate features (default: all 18)")
     _add_framework_options(demo)
     demo.set_defaults(handler=command_demo)
 
     select = sub.add_parser(
         "select",
-        parents=[quiet],
         help="run the whole framework on your recordings and write a report",
         description="Parameter selection on CSV/Parquet recordings (a file, or a folder with "
         "one file per recording). Rows of a recording must be in time order. Recordings are "
         "split by the --split column (values train, validation, test); without it they are "
         "drawn at random by recording with --validation-fraction and --test-fraction.",
+        **common,
     )
     select.add_argument("data", help="CSV or Parquet file, or a folder of them")
     _add_data_options(select)
-    select.add_argument("--split", default=SPLIT, help="split column (default: %(default)s)")
+    select.add_argument("--split", default=SPLIT, help="split column")
     select.add_argument("--features", nargs="+", help="candidate features (default: all numeric)")
-    select.add_argument("--validation-fraction", type=float, default=0.25)
-    select.add_argument("--test-fraction", type=float, default=0.25)
-    _add_framework_options(select, n_top=10, k_max=10, trade_off_step=10)
+    for part in ("validation", "test"):
+        help_text = f"share of the recordings drawn for {part} when there is no split column"
+        select.add_argument(f"--{part}-fraction", type=float, default=0.25, help=help_text)
+    framework = _framework_defaults()
+    # relevance_trade_offs=None of select_parameters maps the trade-offs in 10% steps
+    _add_framework_options(
+        select, {"n_top": framework["n_top"], "k_max": framework["k_max"], "trade_off_step": 10}
+    )
     select.set_defaults(handler=command_select)
 
     report = sub.add_parser(
         "report",
-        parents=[quiet],
         help="re-render the HTML page of a report folder from its saved tables",
         description="Rebuild index.html from manifest.json, the CSV tables and the PNG figures.",
+        **common,
     )
     report.add_argument("result_dir", help="folder written by 'skhmmgmr demo' or 'select'")
     report.set_defaults(handler=command_report)
 
-    fit = sub.add_parser("fit", parents=[quiet], help="fit a model on CSV/Parquet recordings")
+    fit = sub.add_parser("fit", help="fit a model on CSV/Parquet recordings", **common)
     fit.add_argument("data", help="CSV or Parquet file, one row per sample")
     _add_data_options(fit)
     fit.add_argument("--features", nargs="+", help="feature columns (default: all numeric)")
-    fit.add_argument("--n-states", type=int, default=5)
-    fit.add_argument("--n-init", type=int, default=1)
-    fit.add_argument("--seed", type=int, default=0)
+    fit.add_argument("--n-states", type=int, default=5, help="number of hidden states K")
+    fit.add_argument("--n-init", type=int, default=1, help="EM restarts, the best one is kept")
+    fit.add_argument("--seed", type=int, default=0, help="random seed")
     fit.add_argument("--output", default="model.joblib", help="model file to write")
     fit.set_defaults(handler=command_fit)
 
     predict = sub.add_parser(
-        "predict", parents=[quiet], help="write estimate, std and state probabilities"
+        "predict", help="write estimate, std and state probabilities", **common
     )
     predict.add_argument("model", help="model file written by 'skhmmgmr fit'")
     predict.add_argument("data", help="CSV or Parquet file")

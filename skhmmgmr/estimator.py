@@ -41,12 +41,20 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
     init_params : {"kmeans", "k-means++", "random", "random_from_data"}, default="kmeans"
         How the state means and covariances are initialised (as in
         :class:`sklearn.mixture.GaussianMixture`); start probabilities start uniform and the
-        transition rows are drawn from a flat Dirichlet distribution.
+        transition rows are drawn from a flat Dirichlet distribution. The k-means starts
+        ("kmeans", "k-means++", "random_from_data") cluster an evenly spaced sample of at most
+        100,000 rows (every ``ceil(n_samples / 100000)``-th row from a random offset), then
+        every row joins its nearest centre.
     reg_covar : float, default=1e-6
-        Non-negative value added to the diagonal of every state covariance in every M-step.
-        The engine works on standardised columns (zero mean, unit variance), so the value is
-        relative to each column's variance: constant, collinear and badly scaled columns are
-        all handled by the same regularisation.
+        Non-negative regularisation of the state covariances: a prior
+        ``p(S_k) ∝ exp(-psi / 2 tr(S_k^-1))`` with ``psi = reg_covar * n_samples /
+        n_states`` on every state covariance ``S_k``. The M-step is its exact maximiser,
+        ``S_k = (scatter_k + psi I) / N_k``: a state holding an average share of the rows
+        gets ``reg_covar`` on its diagonal, a lighter state more. EM maximises the penalised
+        log-likelihood (``penalized_log_likelihood_history_``), which never falls. The engine
+        works on standardised columns (zero mean, unit variance), so the value is relative to
+        each column's variance: constant, collinear and badly scaled columns are all handled
+        by the same regularisation. ``0`` gives maximum likelihood.
     random_state : int, RandomState instance or None, default=None
         Seed of the initialisation, for reproducible fits.
     verbose : int, default=0
@@ -77,7 +85,15 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         Log-likelihood of the training recordings under the fitted parameters.
     log_likelihood_history_ : ndarray
         Log-likelihood before every M-step of the kept initialisation, then that of the
-        fitted parameters; non-decreasing up to round-off.
+        fitted parameters. EM maximises the penalised log-likelihood, not this: it may fall
+        slightly in an iteration when ``reg_covar > 0`` (never when ``reg_covar=0``).
+    penalized_log_likelihood_ : float
+        The objective EM maximises, for the fitted parameters: the log-likelihood plus the
+        log covariance prior ``-psi / 2 sum_k tr(S_k^-1)`` (standardised units; see
+        ``reg_covar``). The kept initialisation is the one with the highest value.
+    penalized_log_likelihood_history_ : ndarray
+        The same for every entry of ``log_likelihood_history_``; non-decreasing up to
+        round-off (1e-9 relative).
 
     See Also
     --------
@@ -208,11 +224,22 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         self.converged_ = result.converged
         self.log_likelihood_ = result.log_likelihood - jacobian
         self.log_likelihood_history_ = np.asarray(result.history) - jacobian
+        self.penalized_log_likelihood_ = result.objective - jacobian
+        self.penalized_log_likelihood_history_ = np.asarray(result.objective_history) - jacobian
         self._center = center
         self._scale = scale
         if self.verbose:
-            for i, value in enumerate(self.log_likelihood_history_):
-                print(f"EM iteration {i}: log-likelihood {value:.6f}")
+            for i, (value, objective) in enumerate(
+                zip(
+                    self.log_likelihood_history_,
+                    self.penalized_log_likelihood_history_,
+                    strict=True,
+                )
+            ):
+                print(
+                    f"EM iteration {i}: log-likelihood {value:.6f}, "
+                    f"penalised log-likelihood {objective:.6f}"
+                )
         return self
 
     def _baum_welch(self, columns, recordings):

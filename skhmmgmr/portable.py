@@ -30,7 +30,8 @@ The file is one JSON object (format ``"skhmmgmr-hmm-gmr"``, ``format_version`` 1
     the estimator's ``means_`` and ``covars_``, from which :func:`from_dict` restores it.
 ``estimator_params``, ``fit_info``
     Hyperparameters (``get_params()``) and, optionally, ``log_likelihood``,
-    ``log_likelihood_history``, ``n_iter`` and ``converged``.
+    ``log_likelihood_history``, ``penalized_log_likelihood``,
+    ``penalized_log_likelihood_history``, ``n_iter`` and ``converged``.
 
 The filter (METHOD.md section 2): ``alpha_1 ∝ pi * b(z_1)``, ``alpha_t ∝ (alpha_{t-1} @ A) *
 b(z_t)``, estimate ``sum_k alpha_t,k m_k(z_t)``, where ``b_k`` is the Gaussian density of the
@@ -115,6 +116,10 @@ def to_dict(model, output_names=None):
         "fit_info": {
             "log_likelihood": getattr(model, "log_likelihood_", None),
             "log_likelihood_history": getattr(model, "log_likelihood_history_", None),
+            "penalized_log_likelihood": getattr(model, "penalized_log_likelihood_", None),
+            "penalized_log_likelihood_history": getattr(
+                model, "penalized_log_likelihood_history_", None
+            ),
             "n_iter": getattr(model, "n_iter_", None),
             "converged": getattr(model, "converged_", None),
         },
@@ -219,13 +224,15 @@ def from_dict(data, estimator_class):
         raise ValueError("'fit_info' must be a JSON object")
     for key, attribute in [
         ("log_likelihood", "log_likelihood_"),
+        ("penalized_log_likelihood", "penalized_log_likelihood_"),
         ("n_iter", "n_iter_"),
         ("converged", "converged_"),
     ]:
         if fit_info.get(key) is not None:
             setattr(model, attribute, fit_info[key])
-    if fit_info.get("log_likelihood_history") is not None:
-        model.log_likelihood_history_ = np.asarray(fit_info["log_likelihood_history"], float)
+    for key in ("log_likelihood_history", "penalized_log_likelihood_history"):
+        if fit_info.get(key) is not None:
+            setattr(model, key + "_", np.asarray(fit_info[key], float))
     return model
 
 

@@ -7,18 +7,19 @@
    per validation recording and trade-off), models with K=2;
 3. feature relevance: counts of each feature in the per-recording best subsets for every
    trade-off (:func:`feature_relevance`, Fig. 4 / Table A.2);
-4. candidate subsets Strict / Mild / Liberal from the exhaustive (1), forward (2) and combined (3)
-   counts (:func:`candidate_subsets`), compared with K=2 on the validation recordings
-   (:func:`compare_subsets`); the lowest mean performance score wins;
+4. candidate subsets Strict / Mild / Liberal from the exhaustive (1) and forward (2) counts,
+   and their unions (3) (:func:`candidate_subsets`), compared with K=2 on the validation
+   recordings (:func:`compare_subsets`); the lowest mean performance score wins;
 5. state selection for that subset (:class:`~skhmmgmr.state_selection.StateSelector`);
 6. the final model and the all-feature baseline (same K) on the test recordings.
 
 One-way ANOVAs (:func:`one_way_anova`) check whether the metric differences across trade-offs
-and strategies are significant, as in Appendix E.
+and strategies are significant, in the scope of Appendix E.1.2-E.1.4 (see
+:func:`select_parameters`).
 """
 
 import time
-from collections import Counter
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,8 +28,9 @@ from sklearn.base import clone
 from sklearn.model_selection import PredefinedSplit
 from threadpoolctl import threadpool_limits
 
+from ._anova import N_STRATEGIES, check_anova_scope, framework_anova
+from ._candidates import candidate_subsets, check_combined_rule, feature_relevance
 from ._search import (
-    best_per_recording,
     check_recording_splits,
     default_estimator,
     evaluate_models,
@@ -54,114 +56,6 @@ __all__ = [
     "select_parameters",
 ]
 
-STRATEGIES = {"Strict": 0.66, "Mild": 0.33, "Liberal": None}
-SOURCES = {1: "exhaustive", 2: "forward", 3: "combined"}
-
-
-def feature_relevance(results, trade_offs=None, *, features=None):
-    """Count every feature in the per-recording best subsets, for every trade-off.
-
-    For each trade-off and each validation recording the best subset (lowest performance
-    score) is taken and its features are counted: the thesis' feature relevance (Fig. 4,
-    Table A.2). The largest possible count is the number of validation recordings.
-
-    Parameters
-    ----------
-    results : fitted selector or pandas.DataFrame
-        A fitted :class:`~skhmmgmr.feature_selection.ExhaustiveFeatureSelector` or
-        :class:`~skhmmgmr.feature_selection.ForwardFeatureSelector` (its per-recording paths),
-        an exhaustive ``results_`` table (re-scored here), or a table of best subsets with
-        columns ``trade_off``, ``recording`` and ``subset``.
-    trade_offs : list of str, default=None
-        Trade-offs; ``None`` means "100/0" to "0/100" in steps of 10%.
-    features : list of str, default=None
-        Row order (and features with zero count); default: the selector's features or the
-        features met in the subsets.
-
-    Returns
-    -------
-    relevance : pandas.DataFrame
-        Counts, one row per feature and one column per trade-off;
-        ``relevance.attrs["n_recordings"]`` holds the number of recordings counted.
-
-    Examples
-    --------
-    >>> import pandas as pd
-    >>> from skhmmgmr.selection import feature_relevance
-    >>> best = pd.DataFrame({
-    ...     "trade_off": ["50/50", "50/50"], "recording": [1, 2],
-    ...     "subset": [("swa", "yaw_rate"), ("swa",)],
-    ... })
-    >>> feature_relevance(best, ["50/50"])
-    trade_off  50/50
-    swa            2
-    yaw_rate       1
-    """
-    labels = all_trade_offs(10) if trade_offs is None else labels_of(trade_offs)
-    if hasattr(results, "best_subsets"):
-        best = results.best_subsets(labels)
-        if features is None:
-            features = list(results._names())
-    elif "trade_off" in results.columns:
-        best = results[results["trade_off"].isin(labels)]
-    else:
-        best = best_per_recording(
-            rescore_table(results, "subset", labels), "subset", tie_breaker="n_features"
-        )
-    if features is None:
-        features = list(dict.fromkeys(f for subset in best["subset"] for f in subset))
-    counts = pd.DataFrame(0, index=pd.Index(features, name="feature"), columns=labels)
-    for label, block in best.groupby("trade_off", sort=False):
-        counted = Counter(f for subset in block["subset"] for f in subset)
-        counts[label] = [counted.get(f, 0) for f in features]
-    counts.columns.name = "trade_off"
-    counts.index.name = None
-    counts.attrs["n_recordings"] = int(best.groupby("trade_off")["recording"].nunique().max())
-    return counts
-
-
-def candidate_subsets(exhaustive, forward, trade_off="50/50", *, strict=0.66, mild=0.33):
-    """The thesis' nine candidate subsets from the relevance of both wrappers (Table A.2).
-
-    Strict keeps the features counted in at least ``strict`` of the recordings, Mild in at
-    least ``mild``, Liberal at least once; each from the exhaustive (1), forward (2) and
-    combined (3, counts added, shares of the summed recordings) relevance.
-
-    Parameters
-    ----------
-    exhaustive, forward : pandas.DataFrame
-        Outputs of :func:`feature_relevance` (``attrs["n_recordings"]`` set).
-    trade_off : str, default="50/50"
-    strict, mild : float, default=0.66, 0.33
-
-    Returns
-    -------
-    candidates : pandas.DataFrame
-        Columns ``name`` ("Strict 1" ...), ``strategy``, ``source``, ``features`` (tuple,
-        maybe empty), ``n_features``.
-    """
-    label = labels_of(trade_off)[0]
-    features = list(dict.fromkeys([*exhaustive.index, *forward.index]))
-    one = exhaustive[label].reindex(features, fill_value=0)
-    two = forward[label].reindex(features, fill_value=0)
-    n_one, n_two = exhaustive.attrs["n_recordings"], forward.attrs["n_recordings"]
-    sources = {1: (one, n_one), 2: (two, n_two), 3: (one + two, n_one + n_two)}
-    rows = []
-    for number, (counts, n_recordings) in sources.items():
-        for strategy, share in {**STRATEGIES, "Strict": strict, "Mild": mild}.items():
-            threshold = 1 if share is None else share * n_recordings
-            chosen = tuple(f for f in features if counts[f] >= max(threshold, 1))
-            rows.append(
-                {
-                    "name": f"{strategy} {number}",
-                    "strategy": strategy,
-                    "source": SOURCES[number],
-                    "features": chosen,
-                    "n_features": len(chosen),
-                }
-            )
-    return pd.DataFrame(rows)
-
 
 def compare_subsets(
     X,
@@ -180,7 +74,8 @@ def compare_subsets(
     """Fit one model per named feature subset and compare them on the validation recordings.
 
     Equal subsets are fitted once and compared as one model (D.5 normalisation over the
-    distinct subsets), then reported under every name; empty subsets are left out.
+    distinct subsets), then reported under every name. Empty subsets are left out with a
+    ``UserWarning`` naming them.
 
     Parameters
     ----------
@@ -188,7 +83,7 @@ def compare_subsets(
         Candidate features with their names as columns.
     y, groups : array-like of shape (n_samples,)
     subsets : dict
-        Name -> tuple of feature names.
+        Name -> tuple of feature names; at least one must be non-empty.
     cv : splitter
         Training/validation split(s), as in the selectors.
     trade_off : str, default="50/50"
@@ -207,6 +102,16 @@ def compare_subsets(
     values = X.to_numpy(dtype=float)
     y, groups = np.asarray(y, dtype=float), np.asarray(groups)
     splits = check_recording_splits(cv, values, y, groups)
+    empty = [name for name, subset in subsets.items() if not len(subset)]
+    if len(empty) == len(subsets):
+        raise ValueError("every subset is empty: nothing to compare")
+    if empty:
+        warnings.warn(
+            f"empty subset(s) {', '.join(map(str, empty))} left out of the comparison: no "
+            "feature to fit (for a candidate subset: no feature reached its threshold)",
+            UserWarning,
+            stacklevel=2,
+        )
     distinct = list(dict.fromkeys(tuple(s) for s in subsets.values() if len(s)))
     table = evaluate_models(
         default_estimator() if estimator is None else estimator,
@@ -261,10 +166,13 @@ class SelectionReport:
     forward_paths : DataFrame
         Every step of every forward path (per validation recording and trade-off).
     relevance : DataFrame
-        Feature counts, rows (source, feature), one column per trade-off.
+        Feature counts, rows (source, feature), one column per trade-off; the "combined"
+        block is the sum of the two wrappers' counts (the combined candidates are unions of
+        subsets unless ``combined_rule="sum"``).
     candidates : DataFrame
         The candidate subsets with their mean validation metrics, score and rank, plus the
-        baseline (all candidates).
+        baseline (all candidates); an empty candidate stays in the table with ``empty`` True
+        and no score.
     candidate_scores : DataFrame
         Per-recording scores of the candidates.
     states : DataFrame
@@ -274,7 +182,9 @@ class SelectionReport:
     bic : DataFrame
         BIC of every K on the training recordings.
     anova : DataFrame
-        One-way ANOVAs: relevance across trade-offs, strategies, states across trade-offs.
+        One-way ANOVAs in the thesis' scope (Appendix E.1.2-E.1.4): relevance across
+        trade-offs, the best-ranked strategies, the chosen K across trade-offs; ``groups``
+        lists the groups entered.
     test : DataFrame
         Final and baseline model on every test recording (metrics and normalised score).
     test_summary : DataFrame
@@ -304,14 +214,23 @@ class SelectionReport:
     baseline_model: object = field(repr=False)
     timings: dict = field(default_factory=dict)
 
+    @property
+    def empty_candidates(self):
+        """Names of the candidate subsets that came out empty (not compared)."""
+        if "empty" not in self.candidates:
+            return []
+        return list(self.candidates.loc[self.candidates["empty"].astype(bool), "name"])
+
     def summary(self):
         """A short text summary."""
         lines = [
             f"feature subset: {', '.join(self.features)}",
             f"number of states: {self.n_states} (trade-off {self.trade_off})",
-            "test set:",
-            self.test_summary.to_string(index=False),
         ]
+        if self.empty_candidates:
+            names = ", ".join(self.empty_candidates)
+            lines.append(f"empty candidate subsets (not compared): {names}")
+        lines += ["test set:", self.test_summary.to_string(index=False)]
         return "\n".join(lines)
 
     def __repr__(self):
@@ -338,6 +257,9 @@ def select_parameters(
     k_max=20,
     trade_off="50/50",
     relevance_trade_offs=None,
+    combined_rule="union",
+    anova_trade_offs=None,
+    anova_n_strategies=N_STRATEGIES,
     tol=0.01,
     sampling_period=None,
     estimator=None,
@@ -371,6 +293,20 @@ def select_parameters(
     relevance_trade_offs : list of str, default=None
         Trade-offs mapped by the relevance (default "100/0" ... "0/100"); the forward paths are
         traced for each of them.
+    combined_rule : {"union", "sum"}, default="union"
+        How the combined candidates (Strict / Mild / Liberal 3) are formed; see
+        :func:`candidate_subsets`. ``"union"`` is the thesis' Table A.2.
+    anova_trade_offs : list of str, default=None
+        Trade-offs compared by the ANOVA of the feature relevance (accuracy and smoothness of
+        the best exhaustive subsets) and by the accuracy ANOVA of the state selection; each
+        must be among the mapped trade-offs. ``None`` means the mapped trade-offs from "100/0"
+        to "40/60" (accuracy weight at least 40%), the range of Appendix E.1.2 and E.1.4. The
+        smoothness ANOVA of the state selection compares every mapped trade-off (E.1.4).
+    anova_n_strategies : int or None, default=7
+        Number of candidate strategies compared by the strategy ANOVA: the best-ranked
+        distinct subsets (mean performance score, as the thesis' Figure E.5 sorts them; a
+        subset met under several names enters once, under its first name; the baseline is no
+        strategy). ``7`` is the "first seven strategies" of Appendix E.1.3; ``None``: all.
     tol : float, default=0.01
         The 1% rule of the forward selection and the state selection.
     sampling_period : float, default=None
@@ -400,6 +336,8 @@ def select_parameters(
     label = labels_of(trade_off)[0]
     if label not in labels:
         labels = [*labels, label]
+    anova_labels = check_anova_scope(anova_trade_offs, anova_n_strategies, labels)
+    check_combined_rule(combined_rule)
     w1, w2 = (float(w) / 100 for w in label.split("/"))
     train = split == "train"
     search = train | (split == "validation")
@@ -456,7 +394,9 @@ def select_parameters(
         },
         names=["source", "feature"],
     )
-    candidates = candidate_subsets(relevance_one, relevance_two, label, strict=0.66, mild=0.33)
+    candidates = candidate_subsets(
+        relevance_one, relevance_two, label, strict=0.66, mild=0.33, combined_rule=combined_rule
+    )
     named = dict(zip(candidates["name"], candidates["features"], strict=True))
     named["Baseline"] = tuple(X.columns)
     candidate_scores, candidate_summary = compare_subsets(
@@ -469,7 +409,7 @@ def select_parameters(
         **{k: v for k, v in common.items() if k not in ("accuracy_weight", "smoothness_weight")},
     )
     baseline = {"name": "Baseline", "strategy": "Baseline", "source": "all candidates"}
-    baseline.update(features=tuple(X.columns), n_features=X.shape[1])
+    baseline.update(features=tuple(X.columns), n_features=X.shape[1], empty=False)
     candidate_summary = pd.concat([candidates, pd.DataFrame([baseline])], ignore_index=True).merge(
         candidate_summary.drop(columns="n_features"), on="name", how="left"
     )
@@ -509,19 +449,14 @@ def select_parameters(
     best_exhaustive = exhaustive.best_subsets(labels)
     per_k = states.rescore(labels)
     picked = per_k.merge(state_choices[["trade_off", "n_states"]], on=["trade_off", "n_states"])
-    anova = pd.concat(
-        [
-            one_way_anova(
-                best_exhaustive, by="trade_off", values=["accuracy", "smoothness"]
-            ).assign(analysis="feature relevance (best subsets across trade-offs)"),
-            one_way_anova(candidate_scores, by="name", values="performance_score").assign(
-                analysis="candidate subsets (across strategies)"
-            ),
-            one_way_anova(picked, by="trade_off", values=["accuracy", "smoothness"]).assign(
-                analysis="state selection (chosen K across trade-offs)"
-            ),
-        ],
-        ignore_index=True,
+    anova = framework_anova(
+        best_exhaustive,
+        candidate_scores,
+        picked,
+        strategies=list(candidates["name"]),
+        trade_offs=anova_labels,
+        all_trade_offs=labels,
+        n_strategies=anova_n_strategies,
     )
     return SelectionReport(
         features=features,
@@ -536,7 +471,7 @@ def select_parameters(
         states=state_scores,
         state_choices=state_choices,
         bic=states.bic_,
-        anova=anova[["analysis", "metric", "F", "pvalue", "n_groups"]],
+        anova=anova,
         test=test_table,
         test_summary=test_summary,
         final_model=final,

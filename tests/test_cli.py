@@ -1,5 +1,7 @@
 """The command line, run in-process: demo/select reports, report re-render, fit/predict, errors."""
 
+import argparse
+import inspect
 import json
 
 import numpy as np
@@ -160,3 +162,69 @@ def test_parser_lists_sub_commands():
     text = build_parser().format_help()
     for command in ("demo", "select", "report", "fit", "predict"):
         assert command in text
+
+
+def test_select_defaults_are_those_of_select_parameters():
+    from skhmmgmr.selection import select_parameters
+
+    defaults = inspect.signature(select_parameters).parameters
+    args = build_parser().parse_args(["select", "runs.csv"])
+    for name in ("n_top", "k_max", "trade_off"):
+        assert getattr(args, name) == defaults[name].default
+    assert args.trade_off_step == 10  # relevance_trade_offs=None maps 10% steps
+
+
+def _sub_parsers():
+    parser = build_parser()
+    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return {"skhmmgmr": parser, **action.choices}
+
+
+@pytest.mark.parametrize("command", ["skhmmgmr", "demo", "select", "report", "fit", "predict"])
+def test_help_shows_every_default(command):
+    parser = _sub_parsers()[command]
+    formatter = parser._get_formatter()
+    for action in parser._actions:
+        if action.option_strings and action.dest != "help":
+            assert "(default: " in formatter._expand_help(action), action.option_strings
+
+
+def test_select_help_text_states_the_defaults(capsys):
+    from skhmmgmr.selection import select_parameters
+
+    defaults = inspect.signature(select_parameters).parameters
+    with pytest.raises(SystemExit):
+        main(["select", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert f"largest number of states (default: {defaults['k_max'].default})" in text
+    assert f"features kept by the filter (default: {defaults['n_top'].default})" in text
+    assert f"(default: {defaults['trade_off'].default})" in text
+    assert "(default: 0.25)" in text and "(default: skhmmgmr_report)" in text
+
+
+def test_select_reports_an_empty_candidate(tmp_path, capsys, monkeypatch):
+    import skhmmgmr.selection
+
+    original = skhmmgmr.selection.candidate_subsets
+
+    def with_empty_strict_2(*args, **kwargs):
+        candidates = original(*args, **kwargs)
+        row = candidates.index[candidates["name"] == "Strict 2"][0]
+        candidates.at[row, "features"] = ()
+        candidates.loc[row, ["n_features", "empty"]] = [0, True]
+        return candidates
+
+    monkeypatch.setattr(skhmmgmr.selection, "candidate_subsets", with_empty_strict_2)
+    path = tmp_path / "runs.csv"
+    make_recordings().to_csv(path, index=False)
+    output = tmp_path / "out"
+    argv = ["select", str(path), "--target", "torque", "--recording", "run", "--time", "t"]
+    argv += ["--n-top", "2", "--k-max", "2", "--trade-off-step", "50", "--n-jobs", "1"]
+    with pytest.warns(UserWarning, match="Strict 2"):
+        assert main([*argv, "--quiet", "--output", str(output)]) == 0
+    assert "empty candidate subsets (not compared): Strict 2" in capsys.readouterr().out
+    manifest = json.loads((output / "manifest.json").read_text())
+    assert manifest["details"]["empty candidate subsets"] == "Strict 2"
+    candidates = pd.read_csv(output / "candidates.csv").set_index("name")
+    assert candidates.loc["Strict 2", "features"] == "(empty)"
+    assert "(empty)" in (output / "index.html").read_text()

@@ -61,9 +61,17 @@ def test_round_trip_predicts_identically(data, model, exported):
     np.testing.assert_array_equal(got_std, expected_std)
     assert restored.get_params() == model.get_params()
     np.testing.assert_array_equal(restored.feature_names_in_, model.feature_names_in_)
-    for name in ["startprob_", "transmat_", "means_", "covars_", "log_likelihood_history_"]:
+    for name in [
+        "startprob_",
+        "transmat_",
+        "means_",
+        "covars_",
+        "log_likelihood_history_",
+        "penalized_log_likelihood_history_",
+    ]:
         np.testing.assert_array_equal(getattr(restored, name), getattr(model, name))
     assert restored.log_likelihood_ == model.log_likelihood_
+    assert restored.penalized_log_likelihood_ == model.penalized_log_likelihood_
     assert restored.n_iter_ == model.n_iter_ and restored.converged_ == model.converged_
     assert HMMGMRRegressor.from_dict(model.to_dict()).to_dict() == model.to_dict()
 

@@ -4,6 +4,7 @@ import joblib
 import numpy as np
 import pandas as pd
 import pytest
+from _protocol_data import PERIOD, make_protocol
 from scipy import stats
 from sklearn.model_selection import PredefinedSplit
 
@@ -15,26 +16,6 @@ from skhmmgmr.selection import (
     one_way_anova,
     select_parameters,
 )
-
-PERIOD = 0.05
-
-
-def make_protocol(n_recordings=(4, 3, 2), length=150, n_features=4, seed=0):
-    """Tidy table like skhmmgmr.datasets: the torque depends on f0 and f1 only."""
-    rng = np.random.default_rng(seed)
-    frames = []
-    for split, n in zip(("train", "validation", "test"), n_recordings, strict=True):
-        for r in range(n):
-            x = np.cumsum(rng.normal(scale=0.15, size=(length, n_features)), axis=0)
-            x -= x.mean(axis=0)
-            frame = pd.DataFrame(x, columns=[f"f{i}" for i in range(n_features)])
-            frame.insert(0, "recording", f"{split}{r}")
-            frame.insert(1, "split", split)
-            frame.insert(2, "time", np.arange(length) * PERIOD)
-            torque = 1.5 * np.tanh(2 * x[:, 0]) + 0.8 * x[:, 1]
-            frame["driver_torque"] = torque + rng.normal(scale=0.05, size=length)
-            frames.append(frame)
-    return pd.concat(frames, ignore_index=True)
 
 
 @pytest.fixture(scope="module")
@@ -87,13 +68,22 @@ def test_candidate_subsets_are_nested():
     assert by_name["Mild 1"] == ("a", "b")
     assert by_name["Liberal 1"] == ("a", "b", "c", "d")
     assert by_name["Strict 2"] == ("b",)
-    # combined: counts 10, 14, 4, 1, 2 of 20 recordings
-    assert by_name["Strict 3"] == ("b",)
+    assert by_name["Mild 2"] == ("b",)
+    assert by_name["Liberal 2"] == ("b", "c", "e")
+    # combined: the union of 1 and 2
+    assert by_name["Strict 3"] == ("a", "b")
     assert by_name["Mild 3"] == ("a", "b")
     assert by_name["Liberal 3"] == tuple("abcde")
-    for n in (1, 2, 3):
-        strict, mild, liberal = (set(by_name[f"{s} {n}"]) for s in ("Strict", "Mild", "Liberal"))
-        assert strict <= mild <= liberal
+    # the summed rule: counts 10, 14, 4, 1, 2 of 20 recordings
+    summed = candidate_subsets(one, two, labels[0], combined_rule="sum")
+    by_name_summed = dict(zip(summed["name"], summed["features"], strict=True))
+    assert by_name_summed["Strict 3"] == ("b",)
+    assert by_name_summed["Mild 3"] == ("a", "b")
+    assert by_name_summed["Liberal 3"] == tuple("abcde")
+    for names in (by_name, by_name_summed):
+        for n in (1, 2, 3):
+            strict, mild, liberal = (set(names[f"{s} {n}"]) for s in ("Strict", "Mild", "Liberal"))
+            assert strict <= mild <= liberal
 
 
 def test_one_way_anova_matches_scipy():
@@ -137,6 +127,19 @@ def test_select_parameters_report(report):
     assert report.baseline_model.n_features_in_ == 4
     assert report.final_model.n_states == report.baseline_model.n_states == report.n_states
     assert set(report.anova["analysis"].str.split(" ").str[0]) == {"feature", "candidate", "state"}
+    # the thesis' scope (Appendix E.1.2-E.1.4), groups in the order entered
+    thesis_range = tuple(f"{a}/{100 - a}" for a in range(100, 39, -10))
+    anova = report.anova.assign(step=report.anova["analysis"].str.split(":").str[0])
+    groups = anova.set_index(["step", "metric"])["groups"]
+    assert groups["feature relevance", "accuracy"] == thesis_range
+    assert groups["feature relevance", "smoothness"] == thesis_range
+    assert groups["state selection", "accuracy"] == thesis_range
+    assert groups["state selection", "smoothness"] == tuple(report.relevance.columns)
+    strategies = groups["candidate subsets", "performance_score"]
+    ranked = report.candidates.dropna(subset=["rank"]).query("name != 'Baseline'")
+    distinct = ranked.assign(key=ranked["features"].map(frozenset)).drop_duplicates("key")
+    expected = distinct.sort_values("rank")["name"].head(7)
+    assert strategies == tuple(expected)
     assert "feature subset" in report.summary()
 
 
