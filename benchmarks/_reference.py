@@ -25,7 +25,9 @@ from sklearn.mixture._gaussian_mixture import (
 from sklearn.utils import check_random_state
 
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr._em import INIT_SAMPLE_ROWS, MIN_STATE_WEIGHT, EMResult, HMMParameters
+from skhmmgmr._em import EMResult, HMMParameters
+from skhmmgmr._em_init import INIT_SAMPLE_ROWS
+from skhmmgmr._emissions import MIN_STATE_WEIGHT, FullCovariance
 
 
 def _gaussians(resp, X, reg_covar, previous=None, prior_scale=None):
@@ -61,7 +63,7 @@ def _initial_parameters(X, n_states, reg_covar, random_state):
     means[weights < 1e-12] = X.mean(axis=0)
     startprob = np.full(n_states, 1.0 / n_states)
     transmat = random_state.dirichlet(np.ones(n_states), size=n_states)
-    return HMMParameters(startprob, transmat, means, covariances)
+    return HMMParameters.gaussian(startprob, transmat, means, covariances)
 
 
 def _e_step(X, bounds, params):
@@ -108,7 +110,7 @@ def reference_baum_welch(X, bounds, n_states, *, n_iter, tol, reg_covar, random_
         _, means, covariances = _gaussians(
             resp, X, reg_covar, previous=params, prior_scale=prior_scale
         )
-        params = HMMParameters(start / start.sum(), transmat, means, covariances)
+        params = HMMParameters.gaussian(start / start.sum(), transmat, means, covariances)
     else:
         history.append(_e_step(X, bounds, params)[0])
         objectives.append(objective(history[-1], params))
@@ -153,7 +155,7 @@ class PeerHMMGMR(HMMGMRRegressor):
     def _baum_welch(self, columns, recordings):
         from hmmlearn.hmm import GaussianHMM
 
-        from skhmmgmr._em import covariance_prior_scale, initialize_parameters
+        from skhmmgmr._em import initialize_parameters
 
         start = initialize_parameters(
             columns,
@@ -170,12 +172,12 @@ class PeerHMMGMR(HMMGMRRegressor):
             n_iter=self.n_iter,
             tol=self.tol * n_samples,
             init_params="",
-            covars_prior=covariance_prior_scale(self.reg_covar, n_samples, self.n_states)
+            covars_prior=FullCovariance.prior_for(self.reg_covar, n_samples, self.n_states).scale
             * np.eye(n_dims),
         )
         peer.startprob_, peer.transmat_ = start.startprob, start.transmat
         peer.means_, peer.covars_ = start.means, start.covariances
         peer.fit(columns.rows(), lengths=np.asarray(recordings.lengths))
-        params = HMMParameters(peer.startprob_, peer.transmat_, peer.means_, peer.covars_)
+        params = HMMParameters.gaussian(peer.startprob_, peer.transmat_, peer.means_, peer.covars_)
         history = list(peer.monitor_.history)
         return EMResult(params, history[-1], history, peer.monitor_.iter, peer.monitor_.converged)

@@ -1,8 +1,8 @@
 """skhmmgmr: Hidden Markov Model + Gaussian Mixture Regression for scikit-learn."""
 
-__version__ = "0.1.0.dev0"
-
 from . import datasets, feature_selection, metrics, selection, state_selection
+from ._fitted import FittedHMMGMR, Standardization
+from ._version import __version__
 from .estimator import HMMGMRRegressor
 from .feature_selection import (
     ExhaustiveFeatureSelector,
@@ -19,12 +19,14 @@ __all__ = [
     "AccuracyScore",
     "ExhaustiveFeatureSelector",
     "FilterStream",
+    "FittedHMMGMR",
     "ForwardFeatureSelector",
     "HMMGMRRegressor",
     "PerformanceScore",
     "SelectionReport",
     "SmoothnessScore",
     "SpearmanSelector",
+    "Standardization",
     "StateSelector",
     "__version__",
     "datasets",

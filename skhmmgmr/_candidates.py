@@ -8,7 +8,7 @@ from collections import Counter
 
 import pandas as pd
 
-from ._search import best_per_recording, labels_of, rescore_table
+from ._search import best_per_recording, input_feature_names, labels_of, rescore_table
 from .metrics import trade_offs as all_trade_offs
 
 # Share of the recordings a feature must reach; Liberal: counted at least once.
@@ -60,7 +60,7 @@ def feature_relevance(results, trade_offs=None, *, features=None):
     if hasattr(results, "best_subsets"):
         best = results.best_subsets(labels)
         if features is None:
-            features = list(results._names())
+            features = list(input_feature_names(results))
     elif "trade_off" in results.columns:
         best = results[results["trade_off"].isin(labels)]
     else:

@@ -1,6 +1,7 @@
 """Gaussian Mixture Regression weighted by the forward variable on the inputs (METHOD.md s. 2).
 
-For every state ``k`` the joint Gaussian over ``[F, T]`` gives
+For every state ``k`` the emission over ``[F, T]`` gives (:meth:`GaussianEmissions.condition
+<skhmmgmr._emissions.GaussianEmissions.condition>`)
 - the input marginal ``N(F; mu_k^F, S_k^FF)``,
 - the conditional mean ``m_k(F) = mu_k^T + S_k^TF (S_k^FF)^-1 (F - mu_k^F)``, an affine map
   stored as ``coef_k`` and ``intercept_k``,
@@ -13,25 +14,23 @@ look-ahead) and mixes the per-state conditional means with the filtered state pr
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import linalg
 
-from ._gaussian import (
-    augmented_columns,
-    chunk_size_for,
-    compute_precision_cholesky,
-    stack_gaussians,
-)
-from ._kernels import forward, scaled_densities
+from ._gaussian import augmented_columns, chunk_size_for
+from ._kernels import forward
 
 
-@dataclass
+@dataclass(frozen=True)
 class GMRParameters:
-    """Everything the filter needs, in the data's own units."""
+    """Everything the filter needs (in the units of the emission it was read from).
+
+    ``gating`` is the emission model of the inputs (the input marginal of every state); the
+    conditional mean of the outputs in state ``k`` is ``coef[k] @ x + intercept[k]`` and its
+    covariance ``conditional_covariances[k]``.
+    """
 
     startprob: np.ndarray  # (K,)
     transmat: np.ndarray  # (K, K)
-    input_means: np.ndarray  # (K, n_inputs)
-    input_precisions_chol: np.ndarray  # (K, n_inputs, n_inputs)
+    gating: object  # emission over the inputs
     coef: np.ndarray  # (K, n_outputs, n_inputs)
     intercept: np.ndarray  # (K, n_outputs)
     conditional_covariances: np.ndarray  # (K, n_outputs, n_outputs)
@@ -40,31 +39,16 @@ class GMRParameters:
     def n_states(self):
         return self.startprob.shape[0]
 
+    @property
+    def conditional_variances(self):
+        """Diagonals of the conditional covariances, shape (K, n_outputs)."""
+        return np.diagonal(self.conditional_covariances, axis1=1, axis2=2)
 
-def condition_on_inputs(startprob, transmat, means, covariances, n_inputs):
-    """Split joint Gaussians into input marginals and per-state linear regressions."""
-    n_states = means.shape[0]
-    n_outputs = means.shape[1] - n_inputs
-    coef = np.empty((n_states, n_outputs, n_inputs))
-    conditional = np.empty((n_states, n_outputs, n_outputs))
-    for k in range(n_states):
-        s_ff = covariances[k, :n_inputs, :n_inputs]
-        s_tf = covariances[k, n_inputs:, :n_inputs]
-        s_tt = covariances[k, n_inputs:, n_inputs:]
-        coef[k] = linalg.solve(s_ff, s_tf.T, assume_a="pos").T
-        conditional[k] = s_tt - coef[k] @ s_tf.T
-        conditional[k] = 0.5 * (conditional[k] + conditional[k].T)
-    intercept = means[:, n_inputs:] - np.einsum("kof,kf->ko", coef, means[:, :n_inputs])
-    input_covariances = np.ascontiguousarray(covariances[:, :n_inputs, :n_inputs])
-    return GMRParameters(
-        startprob=startprob,
-        transmat=transmat,
-        input_means=np.ascontiguousarray(means[:, :n_inputs]),
-        input_precisions_chol=compute_precision_cholesky(input_covariances),
-        coef=coef,
-        intercept=intercept,
-        conditional_covariances=conditional,
-    )
+
+def condition_on_inputs(startprob, transmat, emissions, n_inputs):
+    """GMR read-out of an HMM whose emission covers ``[inputs, outputs]``."""
+    gating, coef, intercept, conditional = emissions.condition(n_inputs)
+    return GMRParameters(startprob, transmat, gating, coef, intercept, conditional)
 
 
 def filter_state_probabilities(X, recordings, params, chunk_size=None):
@@ -76,13 +60,13 @@ def filter_state_probabilities(X, recordings, params, chunk_size=None):
     recursion restarts at that row from the input densities alone instead of producing NaN.
     """
     n_samples = X.shape[0]
-    n_states, n_inputs = params.input_means.shape
-    factors, norms = stack_gaussians(params.input_means, params.input_precisions_chol)
+    n_states, n_inputs = params.n_states, params.gating.n_dims
+    density = params.gating.density()
     step = chunk_size_for(n_states * n_inputs, chunk_size)
     frames, top = np.empty((n_samples, n_states)), np.empty(n_samples)
     for start in range(0, n_samples, step):
         rows = slice(start, start + step)
-        scaled_densities(factors @ augmented_columns(X[rows]), norms[:, 0], frames[rows], top[rows])
+        density.frames(augmented_columns(X[rows]), frames[rows], top[rows])
     alpha = np.empty_like(frames)
     forward(
         frames,
@@ -123,7 +107,7 @@ def mix_estimates(alpha, state_means, params, return_std=False):
     estimate = _sum_over_states(alpha, state_means)
     if not return_std:
         return estimate, None
-    within = alpha @ np.diagonal(params.conditional_covariances, axis1=1, axis2=2)
+    within = alpha @ params.conditional_variances
     spread = state_means - estimate[:, np.newaxis, :]
     np.square(spread, out=spread)
     between = _sum_over_states(alpha, spread)

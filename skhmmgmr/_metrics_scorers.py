@@ -5,14 +5,9 @@ import numbers
 import warnings
 
 import numpy as np
-from sklearn.utils.metadata_routing import (
-    UNCHANGED,
-    MetadataRequest,
-    _MetadataRequester,
-    _routing_enabled,
-    get_routing_for_object,
-)
+from sklearn.utils.metadata_routing import UNCHANGED, MetadataRequest, get_routing_for_object
 
+from ._compat import _MetadataRequester, _routing_enabled
 from ._metrics_table import (
     average,
     check_weights,

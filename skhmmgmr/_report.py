@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ._version import __version__
+
 MANIFEST = "manifest.json"
 PAGE = "index.html"
 MAX_ROWS = 25
@@ -67,8 +69,6 @@ def versions():
     import scipy
     import sklearn
 
-    from . import __version__
-
     found = {
         "skhmmgmr": __version__,
         "python": platform.python_version(),
@@ -101,9 +101,9 @@ def report_figures(report, data, *, sampling_period):
     Returns a dict name -> matplotlib figure, empty (with a warning) without matplotlib.
     """
     try:
-        from . import plotting
+        import matplotlib.pyplot  # noqa: F401
 
-        plotting._pyplot()
+        from . import plotting
     except ImportError as exc:
         warnings.warn(f"no figures: {exc}", stacklevel=2)
         return {}
@@ -167,7 +167,7 @@ def write_report(output, *, tables, figures, meta):
     manifest = {**meta, "tables": [], "figures": []}
     for name, table in tables.items():
         file = f"{name}.csv"
-        table.map(_cell).to_csv(output / file, index=False)
+        table.apply(lambda column: column.map(_cell)).to_csv(output / file, index=False)
         caption, shown = TABLES.get(name, (name, True))
         manifest["tables"].append({"name": name, "file": file, "caption": caption, "shown": shown})
     for name, fig in figures.items():

@@ -22,11 +22,11 @@ from sklearn.base import BaseEstimator, clone
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.feature_selection import SelectorMixin
 from sklearn.model_selection import GroupKFold, check_cv
-from sklearn.utils._param_validation import HasMethods, Interval
 from sklearn.utils.validation import check_is_fitted, check_memory, validate_data
 from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
+from ._compat import HasMethods, Interval
 from ._metrics_table import parse_trade_offs
 from .datasets._schema import FEATURE_NAMES, RECORDING, SPLIT, TIME
 from .estimator import HMMGMRRegressor
@@ -467,6 +467,14 @@ def default_estimator():
     return HMMGMRRegressor(n_states=2, random_state=0)
 
 
+def input_feature_names(fitted):
+    """The names of a fitted selector's input columns, ``x0, x1, ...`` when it saw none."""
+    names = getattr(fitted, "feature_names_in_", None)
+    if names is None:
+        return np.asarray([f"x{i}" for i in range(fitted.n_features_in_)], dtype=object)
+    return np.asarray(names, dtype=object)
+
+
 class RecordingSearchMixin:
     """Parameters and helpers shared by the selectors that fit one model per candidate."""
 
@@ -504,10 +512,7 @@ class RecordingSearchMixin:
         return (self.accuracy_weight, self.smoothness_weight)
 
     def _names(self):
-        names = getattr(self, "feature_names_in_", None)
-        if names is None:
-            return np.asarray([f"x{i}" for i in range(self.n_features_in_)], dtype=object)
-        return np.asarray(names, dtype=object)
+        return input_feature_names(self)
 
     def _evaluate(self, X, y, groups, splits, subsets, desc):
         estimator = default_estimator() if self.estimator is None else self.estimator

@@ -99,11 +99,13 @@ def _contiguous_recordings(groups, n_samples):
         raise ValueError("X has no rows")
     # Recordings start where the id changes; a missing id (None, NaN) starts a recording too
     # (NaN differs from itself), so the checks below need only the first id of each.
-    try:
-        differs = np.asarray(groups[1:] != groups[:-1], dtype=bool)
-    except TypeError:  # ids such as pd.NA, whose comparisons are not booleans
+    # Object ids are compared through their codes: ids such as pd.NA have no boolean
+    # comparison (numpy < 1.25 then returns one scalar instead of raising).
+    if groups.dtype == object:
         codes = pd.factorize(groups, sort=False, use_na_sentinel=False)[0]
         differs = codes[1:] != codes[:-1]
+    else:
+        differs = groups[1:] != groups[:-1]
     change = np.flatnonzero(differs) + 1
     starts = np.concatenate(([0], change))
     stops = np.concatenate((change, [n_samples]))

@@ -4,24 +4,30 @@ import warnings
 from numbers import Integral, Real
 
 import numpy as np
-from sklearn.base import BaseEstimator, RegressorMixin, TransformerMixin, _fit_context
+from sklearn.base import BaseEstimator, RegressorMixin, TransformerMixin
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.metrics import r2_score
 from sklearn.utils import metadata_routing
-from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ._em import INIT_METHODS, Columns, HMMParameters, fit_hmm, score_hmm
-from ._gmr import condition_on_inputs, conditional_means, filter_state_probabilities, mix_estimates
+from ._compat import Interval, StrOptions, _fit_context
+from ._em import fit_hmm, score_hmm
+from ._em_data import Columns
+from ._em_init import INIT_METHODS
+from ._emissions import EMISSION_FAMILIES, REFUSED_COVARIANCE_TYPES, emission_family
+from ._estimator_io import ModelIOMixin
+from ._fitted import FittedHMMGMR, Standardization
+from ._gmr import conditional_means, filter_state_probabilities, mix_estimates
 from ._sequences import as_recordings
 from ._validation import check_finite, check_target_finite, column_names_of
 
 
-class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
+class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstimator):
     """Hidden Markov Model + Gaussian Mixture Regression (HMM-GMR) regressor.
 
-    A fully connected hidden Markov model with one full-covariance Gaussian per state is fitted
-    by Baum-Welch (EM) on the joint vector ``[X, y]`` of every recording. Prediction is causal:
+    A fully connected hidden Markov model with one Gaussian per state (a full covariance per
+    state, or one shared by all states) is fitted by Baum-Welch (EM) on the joint vector
+    ``[X, y]`` of every recording. Prediction is causal:
     the forward variable is computed on the inputs only, restarted at every recording, and
     weights the per-state Gaussian-conditional means of ``y`` given ``X`` (Gaussian Mixture
     Regression).
@@ -32,6 +38,12 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
     ----------
     n_states : int, default=5
         Number of hidden states ``K``.
+    covariance_type : {"full", "tied"}, default="full"
+        "full": one full covariance per state (the thesis' model). "tied": one full covariance
+        shared by all states (far fewer parameters for many features and states; the
+        regression slope of the outputs on the inputs is then shared and the intercepts differ
+        by state). "diag" and "spherical" are refused: within a state the outputs would not
+        depend on the inputs, and GMR would predict the state means only.
     n_iter : int, default=100
         Maximum number of EM iterations per initialisation.
     tol : float, default=1e-4
@@ -70,7 +82,13 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         State means over the joint vector ``[inputs, outputs]``, in the data's units
         (``n_dims = n_features_in_ + n_outputs_``).
     covars_ : ndarray of shape (n_states, n_dims, n_dims)
-        Full state covariances over the joint vector, in the data's units.
+        Every state's full covariance over the joint vector, in the data's units (with
+        ``covariance_type="tied"`` the shared one, repeated; as hmmlearn's ``covars_``).
+    model_ : FittedHMMGMR
+        The fitted model as one immutable object: standardisation, HMM parameters, state
+        densities and output shape. ``predict``, :class:`~skhmmgmr.FilterStream` and the
+        portable JSON format read it; ``startprob_``, ``transmat_``, ``means_`` and
+        ``covars_`` are views of it in the data's units.
     n_features_in_ : int
         Number of input features.
     feature_names_in_ : ndarray of shape (n_features,)
@@ -116,6 +134,7 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
 
     _parameter_constraints = {
         "n_states": [Interval(Integral, 1, None, closed="left")],
+        "covariance_type": [StrOptions({*EMISSION_FAMILIES, *REFUSED_COVARIANCE_TYPES})],
         "n_iter": [Interval(Integral, 1, None, closed="left")],
         "tol": [Interval(Real, 0, None, closed="left")],
         "n_init": [Interval(Integral, 1, None, closed="left")],
@@ -137,6 +156,7 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         self,
         n_states=5,
         *,
+        covariance_type="full",
         n_iter=100,
         tol=1e-4,
         n_init=1,
@@ -146,6 +166,7 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         verbose=0,
     ):
         self.n_states = n_states
+        self.covariance_type = covariance_type
         self.n_iter = n_iter
         self.tol = tol
         self.n_init = n_init
@@ -173,11 +194,11 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         -------
         self : HMMGMRRegressor
         """
+        emission_family(self.covariance_type)  # refuses "diag" and "spherical", saying why
         check_target_finite(y, groups)
         X, y = validate_data(
             self, X, y, multi_output=True, y_numeric=True, ensure_all_finite=False, dtype=float
         )
-        self._y_is_1d = y.ndim == 1
         Y = y.reshape(-1, 1) if y.ndim == 1 else y
         self.n_outputs_ = Y.shape[1]
         recordings = as_recordings(groups, X.shape[0], time=time, min_length=2)
@@ -215,19 +236,21 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
                 stacklevel=2,
             )
         params = result.parameters
-        jacobian = n_samples * np.sum(np.log(scale))
-        self.startprob_ = params.startprob
-        self.transmat_ = params.transmat
-        self.means_ = params.means * scale + center
-        self.covars_ = params.covariances * np.outer(scale, scale)
+        self.model_ = FittedHMMGMR.from_standardized(
+            params.startprob,
+            params.transmat,
+            params.emissions,
+            Standardization(center, scale, X.shape[1]),
+            scalar_output=y.ndim == 1,
+            feature_names=getattr(self, "feature_names_in_", None),
+        )
+        jacobian = self.model_.standardization.log_jacobian(n_samples)
         self.n_iter_ = result.n_iter
         self.converged_ = result.converged
-        self.log_likelihood_ = result.log_likelihood - jacobian
-        self.log_likelihood_history_ = np.asarray(result.history) - jacobian
-        self.penalized_log_likelihood_ = result.objective - jacobian
-        self.penalized_log_likelihood_history_ = np.asarray(result.objective_history) - jacobian
-        self._center = center
-        self._scale = scale
+        self.log_likelihood_ = result.log_likelihood + jacobian
+        self.log_likelihood_history_ = np.asarray(result.history) + jacobian
+        self.penalized_log_likelihood_ = result.objective + jacobian
+        self.penalized_log_likelihood_history_ = np.asarray(result.objective_history) + jacobian
         if self.verbose:
             for i, (value, objective) in enumerate(
                 zip(
@@ -254,18 +277,28 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
             tol=self.tol,
             reg_covar=self.reg_covar,
             random_state=self.random_state,
+            covariance_type=self.covariance_type,
         )
 
-    def _gmr_parameters(self):
-        n_inputs = self.n_features_in_
-        scale, center = self._scale, self._center
-        return condition_on_inputs(
-            self.startprob_,
-            self.transmat_,
-            (self.means_ - center) / scale,
-            self.covars_ / np.outer(scale, scale),
-            n_inputs,
-        )
+    @property
+    def startprob_(self):
+        check_is_fitted(self)
+        return self.model_.startprob
+
+    @property
+    def transmat_(self):
+        check_is_fitted(self)
+        return self.model_.transmat
+
+    @property
+    def means_(self):
+        check_is_fitted(self)
+        return self.model_.data_emissions.means
+
+    @property
+    def covars_(self):
+        check_is_fitted(self)
+        return np.array(self.model_.data_emissions.full_covariances)
 
     def _validate_inputs(self, X, groups, time):
         check_is_fitted(self)
@@ -274,8 +307,7 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         check_finite(
             X, name="X", column_names=column_names_of(self, X.shape[1]), recordings=recordings
         )
-        standardized = (X - self._center[: X.shape[1]]) / self._scale[: X.shape[1]]
-        return standardized, recordings
+        return self.model_.standardization.inputs(X), recordings
 
     def predict_state_proba(self, X, groups=None, time=None):
         """Filtered state probabilities ``alpha_t,k`` given the inputs up to each row.
@@ -294,7 +326,7 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
             Rows sum to one.
         """
         standardized, recordings = self._validate_inputs(X, groups, time)
-        return filter_state_probabilities(standardized, recordings, self._gmr_parameters())
+        return filter_state_probabilities(standardized, recordings, self.model_.gmr)
 
     def predict(self, X, groups=None, time=None, return_std=False):
         """Causal GMR estimate of the outputs, filtered recording by recording.
@@ -317,18 +349,17 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         y_std : ndarray of the same shape, only when ``return_std`` is True
         """
         standardized, recordings = self._validate_inputs(X, groups, time)
-        params = self._gmr_parameters()
-        alpha = filter_state_probabilities(standardized, recordings, params)
-        state_means = conditional_means(standardized, params)
-        estimate, std = mix_estimates(alpha, state_means, params, return_std=return_std)
-        output_scale = self._scale[self.n_features_in_ :]
-        estimate = estimate * output_scale + self._center[self.n_features_in_ :]
-        if self._y_is_1d:
+        model = self.model_
+        alpha = filter_state_probabilities(standardized, recordings, model.gmr)
+        state_means = conditional_means(standardized, model.gmr)
+        estimate, std = mix_estimates(alpha, state_means, model.gmr, return_std=return_std)
+        estimate = model.standardization.outputs(estimate)
+        if model.scalar_output:
             estimate = estimate[:, 0]
         if not return_std:
             return estimate
-        std = std * output_scale
-        return estimate, (std[:, 0] if self._y_is_1d else std)
+        std = model.standardization.output_std(std)
+        return estimate, (std[:, 0] if model.scalar_output else std)
 
     def transform(self, X, groups=None, time=None):
         """Filtered state probabilities, as features (see :meth:`predict_state_proba`).
@@ -381,28 +412,15 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         check_is_fitted(self)
         X, y = validate_data(self, X, y, reset=False, multi_output=True, dtype=float)
         Y = y.reshape(-1, 1) if y.ndim == 1 else y
-        joint = np.hstack([X, Y])
-        recordings = as_recordings(groups, joint.shape[0])
-        standardized = (joint - self._center) / self._scale
-        params = HMMParameters(
-            self.startprob_,
-            self.transmat_,
-            (self.means_ - self._center) / self._scale,
-            self.covars_ / np.outer(self._scale, self._scale),
-        )
-        jacobian = joint.shape[0] * np.sum(np.log(self._scale))
-        return score_hmm(standardized, recordings, params) - jacobian
+        recordings = as_recordings(groups, X.shape[0])
+        scaling = self.model_.standardization
+        log_likelihood = score_hmm(scaling.joint(X, Y), recordings, self.model_.hmm_parameters())
+        return log_likelihood + scaling.log_jacobian(X.shape[0])
 
     def n_parameters(self):
         """Number of free parameters of the fitted HMM (for information criteria)."""
         check_is_fitted(self)
-        n_states, n_dims = self.means_.shape
-        return int(
-            (n_states - 1)
-            + n_states * (n_states - 1)
-            + n_states * n_dims
-            + n_states * n_dims * (n_dims + 1) // 2
-        )
+        return self.model_.n_parameters()
 
     def bic(self, X, y, groups=None):
         """Bayesian information criterion of the recordings (lower is better).
@@ -411,129 +429,6 @@ class HMMGMRRegressor(TransformerMixin, RegressorMixin, BaseEstimator):
         """
         log_likelihood = self.log_likelihood(X, y, groups=groups)
         return -2.0 * log_likelihood + self.n_parameters() * np.log(len(X))
-
-    def filter_stream(self, **kwargs):
-        """Sample-by-sample causal filter for real-time use.
-
-        Parameters
-        ----------
-        **kwargs : dict
-            Passed to :class:`~skhmmgmr.FilterStream` (``min_log_density``).
-
-        Returns
-        -------
-        stream : FilterStream
-            Call ``stream.update(sample)`` once per sample and ``stream.reset()`` at the start
-            of every recording; the estimates equal those of :meth:`predict`.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from skhmmgmr import HMMGMRRegressor
-        >>> X = np.cumsum(np.random.default_rng(0).normal(size=(300, 2)), axis=0) / 10
-        >>> model = HMMGMRRegressor(n_states=2, random_state=0).fit(X, X[:, 0] - X[:, 1])
-        >>> stream = model.filter_stream()
-        >>> bool(abs(stream.update(X[0]) - model.predict(X[:1])[0]) < 1e-12)
-        True
-        """
-        from .streaming import FilterStream
-
-        return FilterStream(self, **kwargs)
-
-    def to_dict(self, *, output_names=None):
-        """The fitted model as a JSON-ready dict (the portable model format).
-
-        The dict holds everything the causal filter needs (see :mod:`skhmmgmr.portable` for
-        the keys and their units) and everything :meth:`from_dict` needs to restore the
-        estimator.
-
-        Parameters
-        ----------
-        output_names : list of str, default=None
-            Names of the outputs; ``output_0``, ... when None.
-
-        Returns
-        -------
-        data : dict
-            Nested dicts, lists, strings and finite numbers only.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from skhmmgmr import HMMGMRRegressor
-        >>> X = np.cumsum(np.random.default_rng(0).normal(size=(200, 2)), axis=0)
-        >>> model = HMMGMRRegressor(n_states=2, random_state=0).fit(X, X.sum(axis=1))
-        >>> restored = HMMGMRRegressor.from_dict(model.to_dict(output_names=["torque"]))
-        >>> bool(np.array_equal(restored.predict(X), model.predict(X)))
-        True
-        """
-        from .portable import to_dict
-
-        check_is_fitted(self)
-        return to_dict(self, output_names=output_names)
-
-    def export_json(self, path, *, output_names=None):
-        """Write the portable model file (strict JSON) to ``path``.
-
-        Parameters
-        ----------
-        path : str or path-like
-        output_names : list of str, default=None
-            Names of the outputs; ``output_0``, ... when None.
-
-        See Also
-        --------
-        from_json : restore the estimator from the file.
-        """
-        from .portable import export_json
-
-        check_is_fitted(self)
-        export_json(self, path, output_names=output_names)
-
-    @classmethod
-    def from_dict(cls, data):
-        """Restore a fitted estimator from :meth:`to_dict` output.
-
-        Parameters
-        ----------
-        data : dict
-
-        Returns
-        -------
-        model : HMMGMRRegressor
-            Fitted; predicts as the exported model did.
-
-        Raises
-        ------
-        ValueError
-            If ``data`` is not a dict, lacks a key, has a wrong shape, non-finite numbers or
-            inconsistent parameters, or is of another format version; the message names the
-            key.
-        """
-        from .portable import from_dict
-
-        return from_dict(data, cls)
-
-    @classmethod
-    def from_json(cls, path):
-        """Restore a fitted estimator from a file written by :meth:`export_json`.
-
-        Parameters
-        ----------
-        path : str or path-like
-
-        Returns
-        -------
-        model : HMMGMRRegressor
-
-        Raises
-        ------
-        ValueError
-            If the file is not valid JSON or not a valid model file (see :meth:`from_dict`).
-        """
-        from .portable import from_dict, load_json
-
-        return from_dict(load_json(path), cls)
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

@@ -27,7 +27,9 @@ The file is one JSON object (format ``"skhmmgmr-hmm-gmr"``, ``format_version`` 1
     ``conditional_covariances`` (K x O x O).
 ``joint`` (data units)
     ``means`` (K x (F+O)) and ``covariances`` (K x (F+O) x (F+O)) over ``[inputs, outputs]``:
-    the estimator's ``means_`` and ``covars_``, from which :func:`from_dict` restores it.
+    the estimator's ``means_`` and ``covars_``, from which :func:`read_model` restores it.
+    ``covariance_type`` (optional, default ``"full"``): ``"tied"`` when every state shares
+    one covariance (then all K covariances are equal).
 ``estimator_params``, ``fit_info``
     Hyperparameters (``get_params()``) and, optionally, ``log_likelihood``,
     ``log_likelihood_history``, ``penalized_log_likelihood``,
@@ -41,12 +43,15 @@ input marginal; densities are taken relative to the largest one, and if every pr
 
 import json
 import math
+from dataclasses import dataclass
 from numbers import Integral
 
 import numpy as np
 
+from ._emissions import make_emissions
+from ._fitted import FittedHMMGMR, Standardization
 from ._gaussian import NotPositiveDefiniteError
-from ._gmr import condition_on_inputs
+from ._version import __version__
 
 FORMAT_NAME = "skhmmgmr-hmm-gmr"
 FORMAT_VERSION = 1
@@ -69,22 +74,26 @@ _STANDARDIZATION_SHAPES = {
 _JOINT_SHAPES = {"means": ("K", "D"), "covariances": ("K", "D", "D")}
 
 
-def to_dict(model, output_names=None):
-    """JSON-ready dict of a fitted model; see the module docstring for the keys."""
-    from . import __version__
+def to_dict(model, *, estimator_params=None, fit_info=None, output_names=None):
+    """JSON-ready dict of a :class:`~skhmmgmr.FittedHMMGMR`; see the module docstring.
 
-    params = model._gmr_parameters()
-    n_inputs, n_outputs = model.n_features_in_, model.n_outputs_
+    ``estimator_params`` (the estimator's ``get_params()``) and ``fit_info`` (log-likelihood,
+    histories, iterations) are stored as given.
+    """
+
+    gmr, scaling = model.gmr, model.standardization
+    n_inputs, n_outputs = model.n_inputs, model.n_outputs
     if output_names is None:
         output_names = [f"output_{i}" for i in range(n_outputs)]
     output_names = [str(name) for name in output_names]
     if len(output_names) != n_outputs:
         raise ValueError(f"output_names has {len(output_names)} names for {n_outputs} output(s)")
-    named = hasattr(model, "feature_names_in_")
-    feature_names = model.feature_names_in_ if named else [f"x{i}" for i in range(n_inputs)]
-    estimator_params = model.get_params()
-    if not isinstance(estimator_params["random_state"], Integral | None):
+    named = model.feature_names is not None
+    feature_names = model.feature_names if named else [f"x{i}" for i in range(n_inputs)]
+    estimator_params = dict(estimator_params or {})
+    if not isinstance(estimator_params.get("random_state"), Integral | None):
         estimator_params["random_state"] = None
+    data_emissions = model.data_emissions
     data = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
@@ -95,34 +104,29 @@ def to_dict(model, output_names=None):
         "feature_names": [str(name) for name in feature_names],
         "feature_names_from_fit": named,
         "output_names": output_names,
-        "target_ndim": 1 if model._y_is_1d else 2,
+        "target_ndim": 1 if model.scalar_output else 2,
         "standardization": {
-            "input_center": model._center[:n_inputs],
-            "input_scale": model._scale[:n_inputs],
-            "output_center": model._center[n_inputs:],
-            "output_scale": model._scale[n_inputs:],
+            "input_center": scaling.input_center,
+            "input_scale": scaling.input_scale,
+            "output_center": scaling.output_center,
+            "output_scale": scaling.output_scale,
         },
         "filter": {
-            "start_probabilities": params.startprob,
-            "transition_matrix": params.transmat,
-            "input_means": params.input_means,
-            "input_precision_cholesky": params.input_precisions_chol,
-            "regression_coefficients": params.coef,
-            "regression_intercepts": params.intercept,
-            "conditional_covariances": params.conditional_covariances,
+            "start_probabilities": model.startprob,
+            "transition_matrix": model.transmat,
+            "input_means": gmr.gating.means,
+            "input_precision_cholesky": gmr.gating.precisions_chol,
+            "regression_coefficients": gmr.coef,
+            "regression_intercepts": gmr.intercept,
+            "conditional_covariances": gmr.conditional_covariances,
         },
-        "joint": {"means": model.means_, "covariances": model.covars_},
+        "joint": {
+            "covariance_type": model.covariance_type,
+            "means": data_emissions.means,
+            "covariances": data_emissions.full_covariances,
+        },
         "estimator_params": estimator_params,
-        "fit_info": {
-            "log_likelihood": getattr(model, "log_likelihood_", None),
-            "log_likelihood_history": getattr(model, "log_likelihood_history_", None),
-            "penalized_log_likelihood": getattr(model, "penalized_log_likelihood_", None),
-            "penalized_log_likelihood_history": getattr(
-                model, "penalized_log_likelihood_history_", None
-            ),
-            "n_iter": getattr(model, "n_iter_", None),
-            "converged": getattr(model, "converged_", None),
-        },
+        "fit_info": dict(fit_info or {}),
     }
     return _to_plain(data, "")
 
@@ -143,9 +147,9 @@ def _to_plain(value, key):
     return value
 
 
-def export_json(model, path, output_names=None):
-    """Write :func:`to_dict` of ``model`` to ``path`` as strict JSON (no NaN tokens)."""
-    text = json.dumps(to_dict(model, output_names=output_names), indent=1, allow_nan=False)
+def export_json(data, path):
+    """Write a :func:`to_dict` dict to ``path`` as strict JSON (no NaN tokens)."""
+    text = json.dumps(data, indent=1, allow_nan=False)
     with open(path, "w", encoding="utf-8") as file:
         file.write(text + "\n")
 
@@ -164,8 +168,28 @@ def load_json(path):
         raise ValueError(f"{path} is not a valid JSON file: {exc}") from exc
 
 
-def from_dict(data, estimator_class):
-    """Fitted ``estimator_class`` instance restored from :func:`to_dict` output (validated)."""
+# Fit information the JSON format keeps, as the estimator's attributes (name + "_").
+FIT_INFO_KEYS = (
+    "log_likelihood",
+    "log_likelihood_history",
+    "penalized_log_likelihood",
+    "penalized_log_likelihood_history",
+    "n_iter",
+    "converged",
+)
+
+
+@dataclass(frozen=True)
+class PortableModel:
+    """What a model file holds: the model, the estimator's parameters and its fit info."""
+
+    model: FittedHMMGMR
+    estimator_params: dict
+    fit_info: dict
+
+
+def read_model(data):
+    """:class:`PortableModel` restored from :func:`to_dict` output (validated)."""
     if not isinstance(data, dict):
         raise ValueError(
             f"a portable HMM-GMR model must be a JSON object, got {type(data).__name__}"
@@ -197,43 +221,48 @@ def from_dict(data, estimator_class):
             raise ValueError(f"'standardization.{key}' must be positive")
     _check_probabilities(filtering["start_probabilities"], "filter.start_probabilities")
     _check_probabilities(filtering["transition_matrix"], "filter.transition_matrix")
-    center = np.concatenate([scaling["input_center"], scaling["output_center"]])
-    scale = np.concatenate([scaling["input_scale"], scaling["output_scale"]])
-    _check_filter_matches_joint(filtering, joint, center, scale, dims["F"])
+    standardization = Standardization(
+        np.concatenate([scaling["input_center"], scaling["output_center"]]),
+        np.concatenate([scaling["input_scale"], scaling["output_scale"]]),
+        dims["F"],
+    )
+    emissions = _joint_emissions(data["joint"], joint)
+    try:
+        model = FittedHMMGMR(
+            filtering["start_probabilities"],
+            filtering["transition_matrix"],
+            emissions,
+            standardization,
+            scalar_output=target_ndim == 1,
+            feature_names=feature_names if named else None,
+        )
+    except (NotPositiveDefiniteError, np.linalg.LinAlgError) as exc:
+        raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
+    _check_filter_matches_joint(filtering, model)
 
     params = _require(data, "estimator_params")
     if not isinstance(params, dict):
         raise ValueError("'estimator_params' must be a JSON object")
-    params = {**params, "n_states": dims["K"]}
-    try:
-        model = estimator_class(**params)
-    except TypeError as exc:
-        raise ValueError(f"'estimator_params' holds an unknown parameter: {exc}") from exc
-    model.startprob_ = filtering["start_probabilities"]
-    model.transmat_ = filtering["transition_matrix"]
-    model.means_ = joint["means"]
-    model.covars_ = joint["covariances"]
-    model.n_features_in_ = dims["F"]
-    if named:
-        model.feature_names_in_ = np.asarray(feature_names, dtype=object)
-    model.n_outputs_ = dims["O"]
-    model._y_is_1d = target_ndim == 1
-    model._center, model._scale = center, scale
     fit_info = data.get("fit_info") or {}
     if not isinstance(fit_info, dict):
         raise ValueError("'fit_info' must be a JSON object")
-    for key, attribute in [
-        ("log_likelihood", "log_likelihood_"),
-        ("penalized_log_likelihood", "penalized_log_likelihood_"),
-        ("n_iter", "n_iter_"),
-        ("converged", "converged_"),
-    ]:
-        if fit_info.get(key) is not None:
-            setattr(model, attribute, fit_info[key])
-    for key in ("log_likelihood_history", "penalized_log_likelihood_history"):
-        if fit_info.get(key) is not None:
-            setattr(model, key + "_", np.asarray(fit_info[key], float))
-    return model
+    fit_info = {key: fit_info[key] for key in FIT_INFO_KEYS if fit_info.get(key) is not None}
+    return PortableModel(model, params, fit_info)
+
+
+def _joint_emissions(block, joint):
+    covariance_type = block.get("covariance_type", "full")
+    covariances = joint["covariances"]
+    if covariance_type == "tied":
+        if not np.allclose(covariances, covariances[0], rtol=1e-12, atol=0):
+            raise ValueError("'joint.covariances' must all be equal for covariance_type 'tied'")
+        covariances = covariances[0]
+    try:
+        return make_emissions(covariance_type, joint["means"], covariances)
+    except NotPositiveDefiniteError as exc:
+        raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
+    except ValueError as exc:
+        raise ValueError(f"'joint.covariance_type': {exc}") from exc
 
 
 def _require(data, key, where=""):
@@ -284,24 +313,15 @@ def _check_probabilities(array, name):
         raise ValueError(f"{name!r} must hold non-negative probabilities summing to 1")
 
 
-def _check_filter_matches_joint(filtering, joint, center, scale, n_inputs):
+def _check_filter_matches_joint(filtering, model):
     """The filter block is derived from the joint block: refuse files where they disagree."""
-    try:
-        derived = condition_on_inputs(
-            filtering["start_probabilities"],
-            filtering["transition_matrix"],
-            (joint["means"] - center) / scale,
-            joint["covariances"] / np.outer(scale, scale),
-            n_inputs,
-        )
-    except (NotPositiveDefiniteError, np.linalg.LinAlgError) as exc:
-        raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
+    gmr = model.gmr
     for key, value in [
-        ("input_means", derived.input_means),
-        ("input_precision_cholesky", derived.input_precisions_chol),
-        ("regression_coefficients", derived.coef),
-        ("regression_intercepts", derived.intercept),
-        ("conditional_covariances", derived.conditional_covariances),
+        ("input_means", gmr.gating.means),
+        ("input_precision_cholesky", gmr.gating.precisions_chol),
+        ("regression_coefficients", gmr.coef),
+        ("regression_intercepts", gmr.intercept),
+        ("conditional_covariances", gmr.conditional_covariances),
     ]:
         if not np.allclose(filtering[key], value, rtol=1e-8, atol=1e-10):
             raise ValueError(

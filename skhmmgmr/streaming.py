@@ -7,10 +7,13 @@ on the sample is precomputed at construction and every intermediate result lives
 preallocated buffer, so that an update is a handful of small NumPy calls on fixed buffers:
 
 - the standardised input ``z`` (with a trailing 1) times ONE stacked matrix gives at once the
-  whitened residuals ``(z - mu_k) U_k`` of every state (``U_k`` the precision Cholesky factor of
-  the input marginal) and every per-state conditional mean;
-- the squared residuals times a block-indicator matrix (with the log-normalisers as its last
-  row) give the log-densities of all states in one more product.
+  terms of the gating density's quadratic form of every state
+  (:class:`~skhmmgmr._emissions.GaussianDensity`) and every per-state conditional mean;
+- the squared terms times a block-indicator matrix (with the log-normalisers as its last row)
+  give the log-densities of all states in one more product.
+
+The stream reads a :class:`~skhmmgmr.FittedHMMGMR` (an estimator's ``model_``): the gating
+density, the regressions and the standardisation are that object's.
 """
 
 import math
@@ -19,7 +22,7 @@ from collections.abc import Mapping
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
-from ._gaussian import LOG_2PI, log_det_cholesky
+from ._fitted import FittedHMMGMR
 
 FLAG_OK = "ok"
 FLAG_NON_FINITE = "non-finite"
@@ -38,8 +41,9 @@ class FilterStream:
 
     Parameters
     ----------
-    model : HMMGMRRegressor
-        A fitted estimator. Usually created with ``model.filter_stream()``.
+    model : FittedHMMGMR or HMMGMRRegressor
+        A fitted model, or a fitted estimator (its ``model_`` is read). Usually created with
+        ``estimator.filter_stream()``.
     min_log_density : float, default=log(smallest normal double) ~ -708.4
         A sample whose input log-density, in the standardised units the model works in, is below
         this value in every state is an outlier (see Notes). The default flags exactly the
@@ -92,41 +96,42 @@ class FilterStream:
     """
 
     def __init__(self, model, *, min_log_density=math.log(np.finfo(float).tiny)):
-        check_is_fitted(model)
-        params = model._gmr_parameters()
+        if not isinstance(model, FittedHMMGMR):
+            check_is_fitted(model)
+            model = model.model_
+        params, scaling = model.gmr, model.standardization
         n_states, n_outputs, n_inputs = params.coef.shape
         self.n_features_in_ = n_inputs
-        if hasattr(model, "feature_names_in_"):
-            self.feature_names_in_ = np.asarray(model.feature_names_in_, dtype=object)
+        if model.feature_names is not None:
+            self.feature_names_in_ = np.asarray(model.feature_names, dtype=object)
         self.min_log_density = float(min_log_density)
         self._n_states, self._n_outputs = n_states, n_outputs
-        self._scalar_output = model._y_is_1d
-        self._input_center = np.array(model._center[:n_inputs], dtype=float)
-        self._input_scale = np.array(model._scale[:n_inputs], dtype=float)
-        self._output_center = np.array(model._center[n_inputs:], dtype=float)
-        self._output_scale = np.array(model._scale[n_inputs:], dtype=float)
+        self._scalar_output = model.scalar_output
+        self._input_center = np.array(scaling.input_center)
+        self._input_scale = np.array(scaling.input_scale)
+        self._output_center = np.array(scaling.output_center)
+        self._output_scale = np.array(scaling.output_scale)
         self._center_0, self._scale_0 = float(self._output_center[0]), float(self._output_scale[0])
         self._startprob = np.array(params.startprob, dtype=float)
         # A^T @ alpha is a faster BLAS call than alpha @ A for these tiny sizes.
         self._transmat_t = np.ascontiguousarray(params.transmat.T, dtype=float)
-        self._conditional_variances = np.ascontiguousarray(
-            np.diagonal(params.conditional_covariances, axis1=1, axis2=2)
-        )
+        self._conditional_variances = np.ascontiguousarray(params.conditional_variances)
 
-        # [z, 1] @ weights = [(z - mu_k) U_k for every k, m_k(z) for every k]
-        n_whitened = n_states * n_inputs
-        weights = np.empty((n_inputs + 1, n_whitened + n_states * n_outputs))
-        chol = params.input_precisions_chol
-        weights[:n_inputs, :n_whitened] = np.hstack(list(chol))
-        weights[n_inputs, :n_whitened] = -np.einsum("kf,kfg->kg", params.input_means, chol).ravel()
-        weights[:n_inputs, n_whitened:] = np.hstack(list(params.coef.transpose(0, 2, 1)))
-        weights[n_inputs, n_whitened:] = params.intercept.ravel()
+        # [z, 1] @ weights = [the gating density's quadratic-form terms of every state,
+        # m_k(z) for every k]; log b_k(z) = norm_k - (sum of the squares of state k's terms).
+        density = params.gating.density()
+        n_terms = density.factors.shape[0]
+        weights = np.empty((n_inputs + 1, n_terms + n_states * n_outputs))
+        weights[:, :n_terms] = density.factors.T
+        weights[:n_inputs, n_terms:] = np.hstack(list(params.coef.transpose(0, 2, 1)))
+        weights[n_inputs, n_terms:] = params.intercept.ravel()
         self._weights = weights
-        # [squared residuals, 1] @ block_sum = log-densities: -0.5 * Mahalanobis + normaliser.
-        block_sum = np.zeros((n_whitened + 1, n_states))
-        block_sum[:n_whitened] = -0.5 * np.kron(np.eye(n_states), np.ones((n_inputs, 1)))
-        block_sum[n_whitened] = log_det_cholesky(chol) - 0.5 * n_inputs * LOG_2PI
+        # [squared terms, 1] @ block_sum = log-densities.
+        block_sum = np.zeros((n_terms + 1, n_states))
+        block_sum[:n_terms] = -np.kron(np.eye(n_states), np.ones((n_terms // n_states, 1)))
+        block_sum[n_terms] = density.norms[:, 0]
         self._block_sum = block_sum
+        n_whitened = n_terms
 
         self._z = np.ones(n_inputs + 1)
         self._z_inputs = self._z[:n_inputs]
@@ -139,23 +144,17 @@ class FilterStream:
         # means of the last accepted sample (needed for the std of a held estimate).
         self._work = self._product_buffer(weights.shape[1], n_whitened)
         self._accepted = self._product_buffer(weights.shape[1], n_whitened)
-        self._prior_estimate, self._prior_std = self._prior_mixture(model, n_inputs)
+        mean, std = model.prior_output()
+        if self._scalar_output:
+            self._prior_estimate, self._prior_std = float(mean[0]), float(std[0])
+        else:
+            self._prior_estimate, self._prior_std = mean, std
         self.reset()
 
     def _product_buffer(self, width, n_whitened):
         product = np.empty(width)
         means = product[n_whitened:].reshape(self._n_states, self._n_outputs)
         return product, product[:n_whitened], means[:, 0] if self._scalar_output else means
-
-    def _prior_mixture(self, model, n_inputs):
-        """Output mean and std under the start probabilities, before any input is seen."""
-        means = model.means_[:, n_inputs:]
-        variances = np.diagonal(model.covars_, axis1=1, axis2=2)[:, n_inputs:]
-        mean = self._startprob @ means
-        std = np.sqrt(np.maximum(self._startprob @ (variances + (means - mean) ** 2), 0.0))
-        if self._scalar_output:
-            return float(mean[0]), float(std[0])
-        return mean, std
 
     def reset(self):
         """Restart the filter at the beginning of a new recording.

@@ -6,7 +6,13 @@ from scipy.special import logsumexp
 from scipy.stats import multivariate_normal
 
 from skhmmgmr import _em
-from skhmmgmr._em import HMMParameters, _blocks, _Engine, e_step, initialize_parameters
+from skhmmgmr._em import (
+    HMMParameters,
+    e_step,
+    initialize_parameters,
+)
+from skhmmgmr._em_data import Columns, EStepData, recording_blocks
+from skhmmgmr._emissions import FullCovariance
 from skhmmgmr._gaussian import (
     PAIR_BUFFER_VALUES,
     MomentSums,
@@ -101,7 +107,7 @@ def test_gaussians_from_moments_match_centred_covariances():
 
 def test_blocks_hold_whole_consecutive_recordings():
     recordings = random_recordings(np.random.default_rng(0), np.array([3, 4, 10, 2, 2, 1]))
-    blocks = _blocks(recordings, max_rows=8)
+    blocks = recording_blocks(recordings, max_rows=8)
     assert [(b[0], b[1]) for b in blocks] == [(0, 7), (7, 17), (17, 22)]
     assert blocks[0][2:] == ([0, 3], [3, 7])
     assert blocks[2][2:] == ([0, 2, 4], [2, 4, 5])
@@ -146,23 +152,23 @@ def test_e_step_matches_log_space_reference(chunk_size, block_size, n_states):
     X = rng.normal(size=(90, 3))
     recordings = random_recordings(rng, np.array([30, 1, 17, 2, 40]))
     means, covariances = random_gaussians(rng, n_states, 3)
-    params = HMMParameters(
+    params = HMMParameters.gaussian(
         startprob=rng.dirichlet(np.ones(n_states) * 2),
         transmat=rng.dirichlet(np.ones(n_states) * 3, size=n_states),
         means=means * 0.5,
         covariances=covariances,
     )
-    engine = _Engine(X, recordings, n_states, chunk_size=chunk_size, block_size=block_size)
+    engine = EStepData(X, recordings, n_states, chunk_size=chunk_size, block_size=block_size)
     stats = e_step(engine, params)
     total, resp, start, trans = reference_e_step(X, recordings, params)
-    Xs = X - stats.shift
+    Xs = X - stats.emission.shift
     assert stats.log_likelihood == pytest.approx(total, rel=1e-12)
     np.testing.assert_allclose(stats.start_counts, start, rtol=1e-10)
     np.testing.assert_allclose(stats.transition_counts, trans, rtol=1e-10)
-    np.testing.assert_allclose(stats.state_weights, resp.sum(axis=0), rtol=1e-10)
-    np.testing.assert_allclose(stats.first_moments, resp.T @ Xs, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(stats.emission.weights, resp.sum(axis=0), rtol=1e-10)
+    np.testing.assert_allclose(stats.emission.first, resp.T @ Xs, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(
-        stats.second_moments, np.einsum("nk,ni,nj->kij", resp, Xs, Xs), rtol=1e-9, atol=1e-12
+        stats.emission.second, np.einsum("nk,ni,nj->kij", resp, Xs, Xs), rtol=1e-9, atol=1e-12
     )
 
 
@@ -172,15 +178,15 @@ def test_heaviest_state_from_totals_matches_full_accumulation():
     X = rng.normal(size=(3000, 4)) + 5.0
     recordings = random_recordings(rng, np.array([1000, 2000]))
     params = initialize_parameters(X, recordings, 2, "kmeans", 1e-6, np.random.RandomState(0))
-    engine = _Engine(X, recordings, 2)
+    engine = EStepData(X, recordings, 2)
     e_step(engine, params)
     assert engine.remainder is not None
     derived = e_step(engine, params)
     engine.remainder = None
     full = e_step(engine, params)
-    for name in ("state_weights", "first_moments", "second_moments"):
+    for name in ("weights", "first", "second"):
         np.testing.assert_allclose(
-            getattr(derived, name), getattr(full, name), rtol=1e-10, atol=1e-8
+            getattr(derived.emission, name), getattr(full.emission, name), rtol=1e-10, atol=1e-8
         )
 
 
@@ -320,13 +326,19 @@ def test_e_step_statistics_do_not_depend_on_chunking():
     params = initialize_parameters(
         X, recordings, 4, "random_from_data", 1e-6, np.random.RandomState(0)
     )
-    reference = e_step(_Engine(X, recordings, 4, chunk_size=10**6, block_size=10**6), params)
+    reference = e_step(EStepData(X, recordings, 4, chunk_size=10**6, block_size=10**6), params)
     for chunk_size, block_size in [(64, 64), (1000, 2500), (None, None)]:
-        stats = e_step(_Engine(X, recordings, 4, chunk_size, block_size), params)
+        stats = e_step(EStepData(X, recordings, 4, chunk_size, block_size), params)
         assert stats.log_likelihood == pytest.approx(reference.log_likelihood, rel=1e-13)
-        for name in ("transition_counts", "state_weights", "first_moments", "second_moments"):
+        np.testing.assert_allclose(
+            stats.transition_counts, reference.transition_counts, rtol=1e-11, atol=1e-10
+        )
+        for name in ("weights", "first", "second"):
             np.testing.assert_allclose(
-                getattr(stats, name), getattr(reference, name), rtol=1e-11, atol=1e-10
+                getattr(stats.emission, name),
+                getattr(reference.emission, name),
+                rtol=1e-11,
+                atol=1e-10,
             )
 
 
@@ -378,8 +390,9 @@ def test_gmr_readout_matches_einsum_reference(n_outputs):
     rng = np.random.default_rng(6)
     n_inputs, K = 3, 4
     means, covariances = random_gaussians(rng, K, n_inputs + n_outputs)
+    emissions = FullCovariance(means, covariances)
     params = condition_on_inputs(
-        np.full(K, 1 / K), rng.dirichlet(np.ones(K), size=K), means, covariances, n_inputs
+        np.full(K, 1 / K), rng.dirichlet(np.ones(K), size=K), emissions, n_inputs
     )
     X = rng.normal(size=(211, n_inputs))
     recordings = random_recordings(rng, np.array([100, 111]))
@@ -397,3 +410,27 @@ def test_gmr_readout_matches_einsum_reference(n_outputs):
     expected_std = np.sqrt(within + np.einsum("nk,nko->no", alpha, spread**2))
     np.testing.assert_allclose(estimate, expected_estimate, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(std, expected_std, rtol=1e-12)
+
+
+def test_statistics_of_parts_merge_into_those_of_the_whole():
+    # What cluster workers rely on: E-steps over disjoint recordings, summed.
+    rng = np.random.default_rng(11)
+    X = rng.normal(size=(900, 3)) + 2.0
+    lengths = np.array([200, 300, 150, 250])
+    recordings = random_recordings(rng, lengths)
+    params = initialize_parameters(X, recordings, 3, "kmeans", 1e-6, np.random.RandomState(0))
+    shift = X.mean(axis=0)
+
+    def statistics(rows, part_lengths):
+        columns = Columns(augmented_columns(X[rows], shift), shift)
+        return e_step(EStepData(columns, random_recordings(rng, part_lengths), 3), params)
+
+    whole = statistics(slice(None), lengths)
+    merged = statistics(slice(0, 500), lengths[:2]).merge(statistics(slice(500, None), lengths[2:]))
+    assert merged.log_likelihood == pytest.approx(whole.log_likelihood, rel=1e-13)
+    for name in ("start_counts", "transition_counts"):
+        np.testing.assert_allclose(getattr(merged, name), getattr(whole, name), rtol=1e-11)
+    for name in ("weights", "first", "second"):
+        np.testing.assert_allclose(
+            getattr(merged.emission, name), getattr(whole.emission, name), rtol=1e-10, atol=1e-9
+        )

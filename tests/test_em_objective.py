@@ -15,14 +15,8 @@ import pytest
 from scipy.stats import multivariate_normal
 
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr._em import (
-    HMMParameters,
-    _Statistics,
-    covariance_prior_scale,
-    fit_hmm,
-    log_covariance_prior,
-    m_step,
-)
+from skhmmgmr._em import HMMParameters, Statistics, fit_hmm, m_step
+from skhmmgmr._emissions import CovariancePrior, FullCovariance, MomentStatistics, TiedCovariance
 from skhmmgmr._gaussian import weighted_moments
 from skhmmgmr._sequences import as_recordings
 from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping
@@ -37,25 +31,20 @@ def assert_non_decreasing(history, rtol=1e-9):
 
 
 def statistics_of(resp, X, shift):
-    weights, first, second = weighted_moments(resp, X, shift)
     n_states = resp.shape[1]
-    return _Statistics(
+    return Statistics(
         log_likelihood=0.0,
         start_counts=np.ones(n_states),
         transition_counts=np.ones((n_states, n_states)),
-        state_weights=weights,
-        first_moments=first,
-        second_moments=second,
-        shift=shift,
+        emission=MomentStatistics(*weighted_moments(resp, X, shift), shift),
     )
 
 
 def previous_parameters(n_states, n_features):
     covariances = np.tile(np.eye(n_features), (n_states, 1, 1))
     flat = np.full(n_states, 1.0 / n_states)
-    return HMMParameters(
-        flat, np.tile(flat, (n_states, 1)), np.zeros((n_states, n_features)), covariances
-    )
+    means = np.zeros((n_states, n_features))
+    return HMMParameters.gaussian(flat, np.tile(flat, (n_states, 1)), means, covariances)
 
 
 def penalised_state_objective(resp_k, X, mean, covariance, prior_scale):
@@ -76,7 +65,11 @@ def weighted_rows():
 def test_m_step_matches_plain_loop_map_estimate(weighted_rows):
     X, resp = weighted_rows
     prior_scale = 0.7
-    params = m_step(statistics_of(resp, X, X.mean(axis=0)), previous_parameters(3, 3), prior_scale)
+    params = m_step(
+        statistics_of(resp, X, X.mean(axis=0)),
+        previous_parameters(3, 3),
+        CovariancePrior(prior_scale),
+    )
     for k in range(3):
         weight = resp[:, k].sum()
         mean = resp[:, k] @ X / weight
@@ -90,7 +83,11 @@ def test_m_step_matches_plain_loop_map_estimate(weighted_rows):
 def test_m_step_maximises_the_penalised_expected_objective(weighted_rows):
     X, resp = weighted_rows
     prior_scale = 2.0
-    params = m_step(statistics_of(resp, X, X.mean(axis=0)), previous_parameters(3, 3), prior_scale)
+    params = m_step(
+        statistics_of(resp, X, X.mean(axis=0)),
+        previous_parameters(3, 3),
+        CovariancePrior(prior_scale),
+    )
     rng = np.random.default_rng(1)
     for k in range(3):
         best = penalised_state_objective(
@@ -110,24 +107,27 @@ def test_light_state_keeps_its_parameters():
     X = np.random.default_rng(2).normal(size=(50, 2))
     resp = np.column_stack([np.ones(50), np.zeros(50)])
     previous = previous_parameters(2, 2)
-    previous.means[1] = [5.0, -5.0]
-    params = m_step(statistics_of(resp, X, np.zeros(2)), previous, 1.0)
+    previous.emissions.means[1] = [5.0, -5.0]
+    params = m_step(statistics_of(resp, X, np.zeros(2)), previous, CovariancePrior(1.0))
     np.testing.assert_array_equal(params.means[1], [5.0, -5.0])
     np.testing.assert_array_equal(params.covariances[1], np.eye(2))
 
 
-def test_log_covariance_prior_hand_computed():
+def test_log_prior_hand_computed():
     covariances = np.array([np.diag([1.0, 4.0]), np.diag([0.5, 2.0])])
-    params = previous_parameters(2, 2)
-    params = HMMParameters(params.startprob, params.transmat, params.means, covariances)
+    emissions = FullCovariance(np.zeros((2, 2)), covariances)
     # tr(S^-1): 1 + 1/4 and 2 + 1/2, so -psi/2 * 3.75 with psi = 2
-    assert log_covariance_prior(params, 2.0) == pytest.approx(-3.75, rel=1e-14)
-    assert log_covariance_prior(params, 0.0) == 0.0
+    assert emissions.log_prior(CovariancePrior(2.0)) == pytest.approx(-3.75, rel=1e-14)
+    assert emissions.log_prior(CovariancePrior(0.0)) == 0.0
+    # tied: the shared covariance counts once
+    tied = TiedCovariance(np.zeros((3, 2)), np.diag([1.0, 4.0]))
+    assert tied.log_prior(CovariancePrior(2.0)) == pytest.approx(-1.25, rel=1e-14)
 
 
 def test_average_state_gets_reg_covar_on_its_diagonal():
-    prior_scale = covariance_prior_scale(1e-6, n_samples=10_000, n_states=4)
-    assert prior_scale / (10_000 / 4) == pytest.approx(1e-6, rel=1e-15)
+    # full: n / K rows' worth of scatter per state; tied: all n rows for the shared matrix
+    assert FullCovariance.prior_for(1e-6, 10_000, 4).scale / (10_000 / 4) == pytest.approx(1e-6)
+    assert TiedCovariance.prior_for(1e-6, 10_000, 4).scale / 10_000 == pytest.approx(1e-6)
 
 
 def test_without_regularisation_the_objective_is_the_log_likelihood():

@@ -121,7 +121,7 @@ def test_em_iterations_match_hmmlearn(data):
     recordings = as_recordings(groups, len(joint))
     rng = np.random.default_rng(1)
     K, D = 3, joint.shape[1]
-    start = HMMParameters(
+    start = HMMParameters.gaussian(
         startprob=np.array([0.5, 0.3, 0.2]),
         transmat=rng.dirichlet(np.ones(K) * 5, size=K),
         means=joint[rng.choice(len(joint), K, replace=False)],

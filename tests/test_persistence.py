@@ -41,6 +41,7 @@ def test_init_stores_parameters_verbatim():
     model = HMMGMRRegressor(7, n_iter=3, tol=0.5, n_init=2, reg_covar=1e-3, random_state=4)
     assert model.get_params() == {
         "n_states": 7,
+        "covariance_type": "full",
         "n_iter": 3,
         "tol": 0.5,
         "n_init": 2,
@@ -109,6 +110,9 @@ def test_skops_round_trip_with_trusted_types(fitted, frame, tmp_path):
     path = tmp_path / "model.skops"
     sio.dump(fitted, path)
     untrusted = sio.get_untrusted_types(file=path)
-    assert untrusted == ["skhmmgmr.estimator.HMMGMRRegressor"]
+    # the estimator and the parts of its fitted model, nothing from outside the package
+    assert "skhmmgmr.estimator.HMMGMRRegressor" in untrusted
+    assert "skhmmgmr._fitted.FittedHMMGMR" in untrusted
+    assert all(name.startswith("skhmmgmr.") for name in untrusted), untrusted
     loaded = sio.load(path, trusted=untrusted)
     _assert_same_model(fitted, loaded, X, groups)

@@ -1,6 +1,7 @@
 """FilterStream: sample-by-sample parity with predict, state handling, held samples."""
 
 import copy
+import dataclasses
 import math
 
 import numpy as np
@@ -194,9 +195,9 @@ def test_no_nan_comes_out_of_a_hostile_stream(data, model):
 def test_restart_when_transitions_rule_out_every_state(data, model):
     """A zero product ``prior * density`` restarts the filter, exactly as predict does."""
     X, _, _ = data
-    rigid = copy.deepcopy(model)
-    rigid.transmat_ = np.eye(4)
-    rigid.startprob_ = np.eye(4)[0]
+    rigid = HMMGMRRegressor.from_fitted_model(
+        dataclasses.replace(model.model_, transmat=np.eye(4), startprob=np.eye(4)[0])
+    )
     rows = X[:100].copy()
     # Far from state 0 (its relative density underflows) but close enough to state 2.
     rows[50] = 4.0 * rigid.means_[2, :3] - 3.0 * rigid.means_[0, :3]

@@ -1,0 +1,35 @@
+"""The package's only door to scikit-learn's private API.
+
+scikit-learn may rename, move or drop anything private (a ``_``-prefixed module or name) in any
+release without a deprecation cycle. Every such name the package needs is imported here, and
+only here (``tests/test_compat.py`` checks it), so that a change in a new scikit-learn release,
+or a difference in the oldest supported one, is dealt with in this one module, with a version
+switch if a name moves. imbalanced-learn keeps the same kind of shim
+(``imblearn/utils/_sklearn_compat.py``).
+
+Per name: what it is and the first scikit-learn release that has it at this import path. All
+of them predate the oldest supported release (``scikit-learn>=1.8`` in ``pyproject.toml``) and
+sit at the same path from 1.8 to 1.9, so no version switch is needed yet.
+"""
+
+from sklearn.base import (
+    _fit_context,  # fit decorator: validates _parameter_constraints once; since 1.3
+)
+from sklearn.utils._param_validation import (
+    HasMethods,  # constraint: an object having the given methods; since 1.2
+    Interval,  # constraint: a real or integral number in a range; since 1.2
+    StrOptions,  # constraint: one of a set of strings; since 1.2
+)
+from sklearn.utils.metadata_routing import (
+    _MetadataRequester,  # base class giving set_{method}_request and defaults; since 1.3
+    _routing_enabled,  # whether enable_metadata_routing is on in the config; since 1.3
+)
+
+__all__ = [
+    "HasMethods",
+    "Interval",
+    "StrOptions",
+    "_MetadataRequester",
+    "_fit_context",
+    "_routing_enabled",
+]

@@ -1,0 +1,72 @@
+"""Conversions between :class:`~skhmmgmr.FittedHMMGMR` and hmmlearn's ``GaussianHMM``.
+
+hmmlearn's model is an HMM over the joint columns ``[inputs, outputs]`` in the data's units;
+ours keeps the same HMM over standardised columns, which changes neither the log-likelihood
+(up to the constant Jacobian of the standardisation, which :class:`Standardization` applies)
+nor the GMR read-out.
+"""
+
+import numpy as np
+
+from ._emissions import emission_family
+from ._fitted import FittedHMMGMR, Standardization
+
+
+def to_hmmlearn(model):
+    """A fitted ``hmmlearn.hmm.GaussianHMM`` over the joint columns, in the data's units."""
+    from hmmlearn.hmm import GaussianHMM
+
+    emissions = model.data_emissions
+    hmm = GaussianHMM(
+        n_components=model.n_states, covariance_type=model.covariance_type, init_params=""
+    )
+    hmm.n_features = emissions.n_dims
+    hmm.startprob_ = np.array(model.startprob)
+    hmm.transmat_ = np.array(model.transmat)
+    hmm.means_ = np.array(emissions.means)
+    hmm.covars_ = np.array(emissions.covariances)
+    return hmm
+
+
+def _standardization_of(means, covariances, n_inputs):
+    """Centre and scale of the equally weighted mixture of the states: any positive scale
+    gives the same model, this one keeps the filter's numbers near one."""
+    center = means.mean(axis=0)
+    variances = np.diagonal(covariances, axis1=1, axis2=2).mean(axis=0) + means.var(axis=0)
+    return Standardization(center, np.sqrt(variances), n_inputs)
+
+
+def from_hmmlearn(hmm, n_outputs=1, feature_names=None):
+    """:class:`FittedHMMGMR` of a fitted ``GaussianHMM`` whose last ``n_outputs`` columns are
+    the outputs.
+
+    Raises
+    ------
+    ValueError
+        If the model is not fitted, its covariance type is not "full" or "tied", or
+        ``n_outputs`` leaves no input.
+    """
+    for name in ("startprob_", "transmat_", "means_"):
+        if not hasattr(hmm, name):
+            raise ValueError(f"the hmmlearn model is not fitted: it has no {name}")
+    covariance_type = getattr(hmm, "covariance_type", None)
+    family = emission_family(covariance_type)
+    means = np.asarray(hmm.means_, dtype=float)
+    n_dims = means.shape[1]
+    if not isinstance(n_outputs, int | np.integer) or not 0 < n_outputs < n_dims:
+        raise ValueError(
+            f"n_outputs must be an integer in [1, {n_dims - 1}] for a model over {n_dims} "
+            f"columns, got {n_outputs!r}"
+        )
+    full = np.asarray(hmm.covars_, dtype=float)  # hmmlearn returns (K, D, D) for every type
+    covariances = full[0] if covariance_type == "tied" else full
+    emissions = family(means, covariances)
+    n_inputs = n_dims - n_outputs
+    return FittedHMMGMR(
+        np.asarray(hmm.startprob_, dtype=float),
+        np.asarray(hmm.transmat_, dtype=float),
+        emissions,
+        _standardization_of(means, full, n_inputs),
+        scalar_output=n_outputs == 1,
+        feature_names=None if feature_names is None else tuple(feature_names),
+    )

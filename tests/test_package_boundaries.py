@@ -1,0 +1,233 @@
+"""The package's boundaries, read from its source: who may touch what is private.
+
+Two rules, checked by walking the abstract syntax tree of every module of the package:
+
+- scikit-learn's private API (a ``_``-prefixed module or name) is imported by ``_compat.py``
+  only, so a change in a scikit-learn release is dealt with in one place;
+- no module reads another module's private state: an attribute access ``obj._name`` or an import
+  ``from .module import _name`` is allowed only in the module that defines ``_name`` (a name a
+  module imports counts as defined there, so ``_compat.py`` lends scikit-learn's names), or, for
+  ``self._name``, in a subclass of a class whose module defines it (a protected hook, as
+  scikit-learn's ``_validate_params`` is to its estimators).
+"""
+
+import ast
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "skhmmgmr"
+COMPAT = PACKAGE / "_compat.py"
+
+# (module, private name) pairs that truly must cross a module boundary, each with its reason.
+# Empty today: every private name is read where it is defined or by a subclass.
+ALLOWED_PRIVATE_ACCESS: set[tuple[str, str]] = set()
+
+
+def _is_private(name):
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _modules():
+    return sorted(path for path in PACKAGE.rglob("*.py"))
+
+
+def _relative(path):
+    return str(path.relative_to(PACKAGE))
+
+
+def _trees():
+    return {path: ast.parse(path.read_text(), filename=str(path)) for path in _modules()}
+
+
+def _sklearn_private_imports(tree):
+    """(line, text) of every import that reaches into scikit-learn's private API."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                parts = alias.name.split(".")
+                if parts[0] == "sklearn" and any(_is_private(p) for p in parts):
+                    found.append((node.lineno, f"import {alias.name}"))
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            parts = node.module.split(".")
+            if parts[0] != "sklearn":
+                continue
+            names = [alias.name for alias in node.names]
+            if any(_is_private(p) for p in parts) or any(_is_private(n) for n in names):
+                found.append((node.lineno, f"from {node.module} import {', '.join(names)}"))
+    return found
+
+
+def _defined_private_names(tree):
+    """Private names a module defines: functions, classes, methods, attributes, globals."""
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            names.add(node.name)
+        elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            names.add(node.id)
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
+            names.add(node.attr)
+        elif isinstance(node, ast.arg):
+            names.add(node.arg)
+        elif isinstance(node, ast.alias):
+            names.add(node.asname or node.name.split(".")[0])
+    return {name for name in names if _is_private(name)}
+
+
+def _private_accesses(tree):
+    """(line, name, how, class) of every read of a private attribute or import of a private name.
+
+    ``class`` is the enclosing class of a ``self._name`` (or ``Base._name``) read, else None.
+    """
+    found = []
+
+    def visit(node, cls):
+        if isinstance(node, ast.ClassDef):
+            cls = node
+        if isinstance(node, ast.Attribute) and _is_private(node.attr):
+            if not isinstance(node.ctx, ast.Store):
+                bases = {b.id for b in cls.bases if isinstance(b, ast.Name)} if cls else set()
+                owner = node.value.id if isinstance(node.value, ast.Name) else None
+                inherited = owner in {"self", "cls"} | bases
+                found.append((node.lineno, node.attr, "attribute", cls if inherited else None))
+        elif isinstance(node, ast.ImportFrom) and node.level > 0:
+            for alias in node.names:
+                if _is_private(alias.name):
+                    found.append((node.lineno, alias.name, "import", None))
+        for child in ast.iter_child_nodes(node):
+            visit(child, cls)
+
+    visit(tree, None)
+    return found
+
+
+def _module_path(path, module, level):
+    """The file a relative import ``from <level dots><module> import ...`` in ``path`` reads."""
+    base = path.parent
+    for _ in range(level - 1):
+        base = base.parent
+    target = base.joinpath(*module.split(".")) if module else base
+    return (
+        target.with_suffix(".py") if target.with_suffix(".py").exists() else target / "__init__.py"
+    )
+
+
+def _base_class_modules(path, tree, cls, trees, seen=None):
+    """Modules defining the package classes ``cls`` derives from, transitively."""
+    seen = set() if seen is None else seen
+    imported_from = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.level > 0:
+            for alias in node.names:
+                imported_from[alias.asname or alias.name] = _module_path(
+                    path, node.module, node.level
+                )
+    local_classes = {n.name: n for n in ast.walk(tree) if isinstance(n, ast.ClassDef)}
+    for base in cls.bases:
+        name = base.id if isinstance(base, ast.Name) else None
+        if name in local_classes and local_classes[name] is not cls:
+            _base_class_modules(path, tree, local_classes[name], trees, seen)
+        elif name in imported_from and imported_from[name] in trees:
+            module = imported_from[name]
+            if module not in seen:
+                seen.add(module)
+                parent = [n for n in ast.walk(trees[module]) if isinstance(n, ast.ClassDef)]
+                for node in parent:
+                    if node.name == name:
+                        _base_class_modules(module, trees[module], node, trees, seen)
+    return seen
+
+
+def test_sklearn_private_api_is_imported_by_the_compat_module_only():
+    trees = _trees()
+    offenders = [
+        f"{_relative(path)}:{line}: {text}"
+        for path, tree in trees.items()
+        if path != COMPAT
+        for line, text in _sklearn_private_imports(tree)
+    ]
+    assert not offenders, "import scikit-learn's private API through _compat.py:\n" + "\n".join(
+        offenders
+    )
+    # The compat module does what it claims: it re-exports the private names it imports.
+    assert _sklearn_private_imports(trees[COMPAT]), "_compat.py imports nothing private"
+
+
+def test_no_module_reads_another_modules_private_state():
+    trees = _trees()
+    defined_in = defaultdict(set)
+    for path, tree in trees.items():
+        for name in _defined_private_names(tree):
+            defined_in[name].add(_relative(path))
+    offenders = []
+    for path, tree in trees.items():
+        module = _relative(path)
+        for line, name, how, cls in _private_accesses(tree):
+            if module in defined_in[name] or (path.name, name) in ALLOWED_PRIVATE_ACCESS:
+                continue
+            if cls is not None:
+                inherited = {_relative(m) for m in _base_class_modules(path, tree, cls, trees)}
+                if inherited & defined_in[name]:
+                    continue
+            owners = ", ".join(sorted(defined_in[name])) or "outside the package"
+            offenders.append(f"{module}:{line}: {how} {name} (defined in {owners})")
+    assert not offenders, "private state read across modules:\n" + "\n".join(offenders)
+
+
+@pytest.mark.parametrize(
+    "source, expected",
+    [
+        ("from sklearn.base import _fit_context", 1),
+        ("from sklearn.utils._param_validation import Interval", 1),
+        ("import sklearn.utils._testing", 1),
+        ("from sklearn.base import clone", 0),
+        ("from ._em import fit_hmm", 0),
+    ],
+)
+def test_the_sklearn_rule_recognises_private_imports(source, expected):
+    assert len(_sklearn_private_imports(ast.parse(source))) == expected
+
+
+def test_the_private_state_rule_sees_attribute_reads_and_imports():
+    accesses = _private_accesses(
+        ast.parse("est._center\nfrom .a import _b\nself._c = 1\nx.__len__")
+    )
+    assert sorted((name, how) for _, name, how, _ in accesses) == [
+        ("_b", "import"),
+        ("_center", "attribute"),
+    ]
+
+
+def _version_tuple(text):
+    parts = [int(p) for p in text.split(".")]
+    return tuple(parts + [0] * (4 - len(parts)))
+
+
+def test_the_oldest_constraints_are_the_lower_bounds_pyproject_claims():
+    """CI's second run installs ``.ci/oldest-constraints.txt``: it must pin every runtime and
+    test dependency at exactly the lower bound ``pyproject.toml`` claims."""
+    import re
+    import tomllib
+
+    root = PACKAGE.parent
+    project = tomllib.loads((root / "pyproject.toml").read_text())["project"]
+    claimed = {}
+    for requirement in project["dependencies"] + project["optional-dependencies"]["test"]:
+        match = re.fullmatch(r"([A-Za-z0-9_-]+)(\[[^\]]*\])?>=([0-9.]+)", requirement)
+        assert match, f"unexpected requirement {requirement!r}: give it a lower bound"
+        claimed[match[1].lower()] = match[3]
+    pinned = {}
+    for line in (root / ".ci" / "oldest-constraints.txt").read_text().splitlines():
+        line = line.split("#")[0].strip()
+        if line:
+            name, version = line.split("==")
+            pinned[name.lower()] = version
+    # pytest and ruff run the checks; their own newest versions are used in both runs
+    for name in set(claimed) - {"pytest", "ruff"}:
+        assert name in pinned, f"{name} is not pinned in .ci/oldest-constraints.txt"
+        assert _version_tuple(pinned[name]) == _version_tuple(claimed[name]), (
+            f"{name}: pyproject.toml claims >={claimed[name]}, CI tests {pinned[name]}"
+        )
