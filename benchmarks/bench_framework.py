@@ -39,7 +39,7 @@ from sklearn.exceptions import ConvergenceWarning
 from threadpoolctl import threadpool_limits
 
 from skhmmgmr import HMMGMRRegressor, select_parameters
-from skhmmgmr._search import best_per_recording, rescore_table
+from skhmmgmr._score_tables import best_per_recording, rescore_table
 from skhmmgmr.datasets._schema import TARGET
 from skhmmgmr.metrics import evaluate_recordings
 

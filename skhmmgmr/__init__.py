@@ -1,6 +1,6 @@
 """skhmmgmr: Hidden Markov Model + Gaussian Mixture Regression for scikit-learn."""
 
-from . import datasets, feature_selection, metrics, selection, state_selection
+from . import datasets, feature_selection, metrics, selection, state_selection, utils
 from ._fitted import FittedHMMGMR, Standardization
 from ._version import __version__
 from .estimator import HMMGMRRegressor
@@ -36,4 +36,5 @@ __all__ = [
     "selection",
     "spearman_relevance",
     "state_selection",
+    "utils",
 ]

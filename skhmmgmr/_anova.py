@@ -14,7 +14,7 @@ import numbers
 import pandas as pd
 
 from ._metrics_table import parse_trade_offs
-from ._search import labels_of, one_way_anova
+from ._score_tables import labels_of, one_way_anova
 
 # "100/0 to 40/60": the trade-offs giving accuracy at least this share of the weight
 LOWEST_ACCURACY_SHARE = 0.4
@@ -97,9 +97,10 @@ def framework_anova(
 
     Parameters
     ----------
-    best_subsets : pandas.DataFrame
+    best_subsets : pandas.DataFrame or None
         Best exhaustive subset per (``trade_off``, ``recording``), with ``accuracy`` and
-        ``smoothness``.
+        ``smoothness``; None (no source gives subsets per recording) leaves the relevance
+        ANOVA out.
     candidate_scores : pandas.DataFrame
         Per (``name``, ``recording``) scores of the candidates (:func:`compare_subsets`), with
         ``subset``, ``n_features`` and ``performance_score``.
@@ -120,12 +121,18 @@ def framework_anova(
         Columns ``analysis``, ``metric``, ``F``, ``pvalue``, ``n_groups`` and ``groups``.
     """
     ranked = strategy_ranking(candidate_scores, strategies, n_strategies)
-    tables = [
-        one_way_anova(
-            _in_order(best_subsets, "trade_off", trade_offs),
-            by="trade_off",
-            values=["accuracy", "smoothness"],
-        ).assign(analysis=ANALYSES["relevance"]),
+    tables = (
+        []
+        if best_subsets is None
+        else [
+            one_way_anova(
+                _in_order(best_subsets, "trade_off", trade_offs),
+                by="trade_off",
+                values=["accuracy", "smoothness"],
+            ).assign(analysis=ANALYSES["relevance"])
+        ]
+    )
+    tables += [
         one_way_anova(
             _in_order(candidate_scores, "name", ranked), by="name", values="performance_score"
         ).assign(analysis=ANALYSES["strategies"]),

@@ -4,16 +4,22 @@ Re-exported by :mod:`skhmmgmr.selection`, where they are documented.
 """
 
 import numbers
+import warnings
 from collections import Counter
+from collections.abc import Mapping
 
+import numpy as np
 import pandas as pd
 
-from ._search import best_per_recording, input_feature_names, labels_of, rescore_table
+from ._evaluation import check_recording_splits, evaluate_models
+from ._score_tables import best_per_recording, labels_of, rescore_table
+from ._selector_base import default_estimator, input_feature_names
 from .metrics import trade_offs as all_trade_offs
 
 # Share of the recordings a feature must reach; Liberal: counted at least once.
 STRATEGIES = {"Strict": 0.66, "Mild": 0.33, "Liberal": None}
-SOURCES = {1: "exhaustive", 2: "forward", 3: "combined"}
+# Name of the candidates built from all sources together.
+COMBINED = "combined"
 COMBINED_RULES = ("union", "sum")
 
 
@@ -90,29 +96,29 @@ def check_combined_rule(combined_rule):
 
 
 def candidate_subsets(
-    exhaustive, forward, trade_off="50/50", *, strict=0.66, mild=0.33, combined_rule="union"
+    relevance, trade_off="50/50", *, strict=0.66, mild=0.33, combined_rule="union"
 ):
-    """The thesis' nine candidate subsets from the relevance of both wrappers (Table A.2).
+    """The thesis' candidate subsets from the relevance of every source (Table A.2).
 
     Strict keeps the features counted in at least ``strict`` of the recordings, Mild in at
-    least ``mild``, Liberal at least once; each from the exhaustive (1) and the forward (2)
-    relevance. The combined (3) subset of a strategy is, as in the thesis' Table A.2, the
-    union of its subsets 1 and 2 (``combined_rule="union"``).
+    least ``mild``, Liberal at least once; each from the relevance of every source, numbered
+    in the mapping's order (the thesis: exhaustive 1, forward 2). The combined subset of a
+    strategy (numbered last, 3 in the thesis) is, as in the thesis' Table A.2, the union of
+    the sources' subsets (``combined_rule="union"``).
 
     Parameters
     ----------
-    exhaustive, forward : pandas.DataFrame
-        Outputs of :func:`feature_relevance` (``attrs["n_recordings"]`` set).
+    relevance : mapping of str to pandas.DataFrame
+        Source name -> output of :func:`feature_relevance` (``attrs["n_recordings"]`` set).
     trade_off : str, default="50/50"
         Column of the relevance tables used.
     strict, mild : float, default=0.66, 0.33
         Shares of the recordings (in (0, 1]) a feature must reach for Strict and Mild.
     combined_rule : {"union", "sum"}, default="union"
-        How the combined (3) subsets are formed. ``"union"``: the union of the exhaustive and
-        forward subsets of the same strategy (the thesis' Table A.2). ``"sum"``: the counts of
-        both wrappers are added and thresholded as a share of all recordings counted by both
-        (the default of earlier skhmmgmr versions); with the thesis' counts it gives an empty
-        Strict 3.
+        How the combined subsets are formed. ``"union"``: the union of the sources' subsets of
+        the same strategy (the thesis' Table A.2). ``"sum"``: the counts of all sources are
+        added and thresholded as a share of all recordings they counted (the default of
+        earlier skhmmgmr versions); with the thesis' counts it gives an empty Strict 3.
 
     Returns
     -------
@@ -129,43 +135,137 @@ def candidate_subsets(
     >>> one = pd.DataFrame({"50/50": [4, 1, 0]}, index=["swa", "yaw_rate", "e_psi30"])
     >>> two = pd.DataFrame({"50/50": [0, 1, 4]}, index=["swa", "yaw_rate", "e_psi30"])
     >>> one.attrs["n_recordings"] = two.attrs["n_recordings"] = 4
-    >>> candidates = candidate_subsets(one, two)
+    >>> candidates = candidate_subsets({"exhaustive": one, "forward": two})
     >>> candidates.set_index("name").loc[["Strict 1", "Strict 2", "Strict 3"], "features"].tolist()
     [('swa',), ('e_psi30',), ('swa', 'e_psi30')]
     """
     _check_share("strict", strict)
     _check_share("mild", mild)
     check_combined_rule(combined_rule)
+    if not isinstance(relevance, Mapping) or not relevance:
+        raise ValueError("relevance must be a non-empty mapping source name -> relevance table")
     label = labels_of(trade_off)[0]
-    features = list(dict.fromkeys([*exhaustive.index, *forward.index]))
-    one = exhaustive[label].reindex(features, fill_value=0)
-    two = forward[label].reindex(features, fill_value=0)
-    n_one, n_two = exhaustive.attrs["n_recordings"], forward.attrs["n_recordings"]
+    features = list(dict.fromkeys(f for table in relevance.values() for f in table.index))
+    counts = {
+        name: table[label].reindex(features, fill_value=0) for name, table in relevance.items()
+    }
+    n_recordings = {name: table.attrs["n_recordings"] for name, table in relevance.items()}
     shares = {**STRATEGIES, "Strict": strict, "Mild": mild}
 
     def chosen(counts, n_recordings, share):
         threshold = 1 if share is None else max(share * n_recordings, 1)
         return tuple(f for f in features if counts[f] >= threshold)
 
-    subsets = {}
-    for strategy, share in shares.items():
-        subsets[strategy, 1] = chosen(one, n_one, share)
-        subsets[strategy, 2] = chosen(two, n_two, share)
-        if combined_rule == "union":
-            union = set(subsets[strategy, 1]) | set(subsets[strategy, 2])
-            subsets[strategy, 3] = tuple(f for f in features if f in union)
-        else:
-            subsets[strategy, 3] = chosen(one + two, n_one + n_two, share)
-    rows = [
-        {
-            "name": f"{strategy} {number}",
-            "strategy": strategy,
-            "source": SOURCES[number],
-            "features": subsets[strategy, number],
-            "n_features": len(subsets[strategy, number]),
-            "empty": not subsets[strategy, number],
-        }
-        for number in SOURCES
-        for strategy in shares
-    ]
+    rows = []
+    sources = [*relevance, COMBINED]
+    for number, source in enumerate(sources, start=1):
+        for strategy, share in shares.items():
+            if source != COMBINED:
+                subset = chosen(counts[source], n_recordings[source], share)
+            elif combined_rule == "union":
+                union = {
+                    f for name in relevance for f in chosen(counts[name], n_recordings[name], share)
+                }
+                subset = tuple(f for f in features if f in union)
+            else:
+                subset = chosen(sum(counts.values()), sum(n_recordings.values()), share)
+            rows.append(
+                {
+                    "name": f"{strategy} {number}",
+                    "strategy": strategy,
+                    "source": source,
+                    "features": subset,
+                    "n_features": len(subset),
+                    "empty": not subset,
+                }
+            )
     return pd.DataFrame(rows)
+
+
+def compare_subsets(
+    X,
+    y,
+    groups,
+    subsets,
+    *,
+    cv,
+    trade_off="50/50",
+    estimator=None,
+    sampling_period=None,
+    n_jobs=None,
+    memory=None,
+    verbose=0,
+):
+    """Fit one model per named feature subset and compare them on the validation recordings.
+
+    Equal subsets are fitted once and compared as one model (D.5 normalisation over the
+    distinct subsets), then reported under every name. Empty subsets are left out with a
+    ``UserWarning`` naming them.
+
+    Parameters
+    ----------
+    X : pandas.DataFrame of shape (n_samples, n_features)
+        Candidate features with their names as columns.
+    y, groups : array-like of shape (n_samples,)
+    subsets : dict
+        Name -> tuple of feature names; at least one must be non-empty.
+    cv : splitter
+        Training/validation split(s), as in the selectors.
+    trade_off : str, default="50/50"
+    estimator, sampling_period, n_jobs, memory, verbose
+        As in the selectors.
+
+    Returns
+    -------
+    scores : pandas.DataFrame
+        One row per (name, recording) with metrics and normalised ``performance_score``.
+    summary : pandas.DataFrame
+        One row per name: mean ``accuracy``, ``smoothness``, ``performance_score`` and
+        ``rank`` (1 = best; ties to fewer features).
+    """
+    names = list(X.columns)
+    values = X.to_numpy(dtype=float)
+    y, groups = np.asarray(y, dtype=float), np.asarray(groups)
+    splits = check_recording_splits(cv, values, y, groups)
+    empty = [name for name, subset in subsets.items() if not len(subset)]
+    if len(empty) == len(subsets):
+        raise ValueError("every subset is empty: nothing to compare")
+    if empty:
+        warnings.warn(
+            f"empty subset(s) {', '.join(map(str, empty))} left out of the comparison: no "
+            "feature to fit (for a candidate subset: no feature reached its threshold)",
+            UserWarning,
+            stacklevel=2,
+        )
+    distinct = list(dict.fromkeys(tuple(s) for s in subsets.values() if len(s)))
+    table = evaluate_models(
+        default_estimator() if estimator is None else estimator,
+        values,
+        y,
+        groups,
+        splits,
+        [(tuple(names.index(f) for f in subset), {}) for subset in distinct],
+        sampling_period=sampling_period,
+        n_jobs=n_jobs,
+        memory=memory,
+        verbose=verbose,
+        desc="candidate subsets",
+    )
+    table.insert(1, "subset", [distinct[i] for i in table["model"]])
+    table.insert(2, "n_features", table["subset"].map(len))
+    scored = rescore_table(table.drop(columns="model"), "subset", trade_off)
+    frames = [
+        scored[scored["subset"] == tuple(subset)].assign(name=name)
+        for name, subset in subsets.items()
+        if len(subset)
+    ]
+    scores = pd.concat(frames, ignore_index=True)
+    summary = scores.groupby(["name", "n_features"], sort=False, as_index=False).agg(
+        accuracy=("accuracy", "mean"),
+        smoothness=("smoothness", "mean"),
+        performance_score=("performance_score", "mean"),
+    )
+    order = summary.sort_values(["performance_score", "n_features"], kind="stable").index
+    summary.loc[order, "rank"] = np.arange(1, len(order) + 1)
+    summary["rank"] = summary["rank"].astype(int)
+    return scores, summary

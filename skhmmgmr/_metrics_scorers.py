@@ -8,6 +8,7 @@ import numpy as np
 from sklearn.utils.metadata_routing import UNCHANGED, MetadataRequest, get_routing_for_object
 
 from ._compat import _MetadataRequester, _routing_enabled
+from ._docstrings import fill_shared_parameters
 from ._metrics_table import (
     average,
     check_weights,
@@ -227,6 +228,7 @@ def _equal(a, b):
         return False
 
 
+@fill_shared_parameters
 class PerformanceScore(_RecordingScorer):
     """Scorer returning the negative performance score ``-PS`` (greater is better).
 
@@ -245,21 +247,12 @@ class PerformanceScore(_RecordingScorer):
 
     Parameters
     ----------
-    accuracy_weight, smoothness_weight : float, default=0.5
-        Trade-off weights ``w1`` and ``w2``.
+    {accuracy_weight, smoothness_weight}
     accuracy_scale, smoothness_scale : float or mapping, default=None
         Reference scales dividing each term; see :func:`performance_score`.
-    sampling_period : float, default=None
-        Seconds between two rows, for the smoothness.
-    time_column : str, default=None
-        Alternatively, the name of a column of ``X`` (a pandas DataFrame) holding the time in
-        seconds. The column stays in ``X`` for the estimator, which must ignore or use it.
-    predict_mode : {"auto", "groups", "per_recording"}, default="auto"
-        How the fold is predicted when ``groups`` is known. ``"groups"``: one call
-        ``estimator.predict(X, groups=groups)`` (the estimator restarts its filter at every
-        recording). ``"per_recording"``: one ``estimator.predict`` call per recording, which
-        works for any estimator or pipeline. ``"auto"``: ``"groups"`` if ``predict`` has a
-        ``groups`` parameter, else ``"per_recording"``.
+    {sampling_period}
+    {time_column}
+    {predict_mode}
 
     See Also
     --------
@@ -352,6 +345,7 @@ class PerformanceScore(_RecordingScorer):
         return average(per_recording, "uniform_average")
 
 
+@fill_shared_parameters
 class AccuracyScore(_RecordingScorer):
     """Scorer returning the mean per-recording accuracy in percent (greater is better).
 
@@ -359,8 +353,7 @@ class AccuracyScore(_RecordingScorer):
 
     Parameters
     ----------
-    predict_mode : {"auto", "groups", "per_recording"}, default="auto"
-        How the fold is predicted; see :class:`PerformanceScore`.
+    {predict_mode}
 
     Examples
     --------
@@ -382,6 +375,7 @@ class AccuracyScore(_RecordingScorer):
         return average(metrics.accuracy, "uniform_average")
 
 
+@fill_shared_parameters
 class SmoothnessScore(_RecordingScorer):
     """Scorer returning the negative mean per-recording smoothness ``-SM`` (greater is better).
 
@@ -389,17 +383,9 @@ class SmoothnessScore(_RecordingScorer):
 
     Parameters
     ----------
-    sampling_period : float, default=None
-        Seconds between two rows, for the smoothness.
-    time_column : str, default=None
-        Alternatively, the name of a column of ``X`` (a pandas DataFrame) holding the time in
-        seconds. The column stays in ``X`` for the estimator, which must ignore or use it.
-    predict_mode : {"auto", "groups", "per_recording"}, default="auto"
-        How the fold is predicted when ``groups`` is known. ``"groups"``: one call
-        ``estimator.predict(X, groups=groups)`` (the estimator restarts its filter at every
-        recording). ``"per_recording"``: one ``estimator.predict`` call per recording, which
-        works for any estimator or pipeline. ``"auto"``: ``"groups"`` if ``predict`` has a
-        ``groups`` parameter, else ``"per_recording"``.
+    {sampling_period}
+    {time_column}
+    {predict_mode}
 
     Examples
     --------

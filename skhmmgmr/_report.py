@@ -39,9 +39,25 @@ TABLES = {
     "states": ("State selection: every K on every validation recording", False),
     "test": ("Test set: every recording", True),
     "candidate_scores": ("Candidate subsets: every validation recording", False),
-    "forward_paths": ("Forward selection: every step of every path", False),
-    "exhaustive": ("Exhaustive wrapper: every subset on every validation recording", False),
 }
+
+# Tables of every relevance source (SelectionReport.source_tables), by the end of their name.
+SOURCE_TABLES = {
+    "_results": "Relevance source {}: every evaluated subset on every validation recording",
+    "_paths": "Relevance source {}: every step of every path",
+    "_selected": "Relevance source {}: the selected features",
+}
+
+
+def table_caption(name):
+    """Caption of a report table and whether the page shows it (else: CSV only)."""
+    if name in TABLES:
+        return TABLES[name]
+    for end, caption in SOURCE_TABLES.items():
+        if name.endswith(end):
+            return caption.format(repr(name[: -len(end)])), False
+    return name, True
+
 
 FIGURES = {
     "estimate": "Estimated against measured torque on a test recording, +-2 std band and "
@@ -90,6 +106,7 @@ def versions():
 def report_tables(report, per_driver):
     """The tables of a :class:`~skhmmgmr.selection.SelectionReport` as flat DataFrames."""
     tables = {name: getattr(report, name) for name in TABLES if hasattr(report, name)}
+    tables.update(report.source_tables)
     tables["relevance"] = report.relevance.reset_index()
     tables["per_driver"] = per_driver
     return tables
@@ -168,7 +185,7 @@ def write_report(output, *, tables, figures, meta):
     for name, table in tables.items():
         file = f"{name}.csv"
         table.apply(lambda column: column.map(_cell)).to_csv(output / file, index=False)
-        caption, shown = TABLES.get(name, (name, True))
+        caption, shown = table_caption(name)
         manifest["tables"].append({"name": name, "file": file, "caption": caption, "shown": shown})
     for name, fig in figures.items():
         file = f"{name}.png"

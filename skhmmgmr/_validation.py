@@ -1,8 +1,28 @@
 """Input checks whose messages name the column and the recording at fault."""
 
 import numpy as np
+from scipy import sparse
 
 from ._sequences import as_recordings
+
+
+def check_dense(values, *, name, by):
+    """Raise a TypeError if ``values`` is a sparse matrix or array.
+
+    Parameters
+    ----------
+    values : object
+        The input as the user gave it.
+    name : str
+        What the array is for the user ("X", "y").
+    by : str
+        Who needs dense input, for the message (a function or estimator name).
+    """
+    if sparse.issparse(values):
+        raise TypeError(
+            f"{by} got sparse input for {name} ({type(values).__name__}); it needs a dense "
+            f"array, one row per sample: convert it with {name}.toarray()"
+        )
 
 
 def check_finite(values, *, name, column_names, recordings):

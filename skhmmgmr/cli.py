@@ -52,7 +52,8 @@ def _read_table(path):
     try:
         if path.suffix in (".parquet", ".pq"):
             return pd.read_parquet(path)
-        return pd.read_csv(path)
+        # recording ids are text: "7" and "007" are two drives
+        return pd.read_csv(path, dtype={RECORDING: str})
     except Exception as exc:  # pandas raises many types for unreadable files
         raise CommandError(f"cannot read {path}: {exc}") from exc
 

@@ -19,7 +19,6 @@ and strategies are significant, in the scope of Appendix E.1.2-E.1.4 (see
 """
 
 import time
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,25 +28,33 @@ from sklearn.model_selection import PredefinedSplit
 from threadpoolctl import threadpool_limits
 
 from ._anova import N_STRATEGIES, check_anova_scope, framework_anova
-from ._candidates import candidate_subsets, check_combined_rule, feature_relevance
-from ._search import (
-    check_recording_splits,
-    default_estimator,
-    evaluate_models,
-    labels_of,
-    one_way_anova,
-    rescore_table,
-    sampling_period_of,
-    shared_evaluations,
-    split_recordings_table,
+from ._candidates import (
+    COMBINED,
+    candidate_subsets,
+    check_combined_rule,
+    compare_subsets,
+    feature_relevance,
+)
+from ._evaluation import shared_evaluations
+from ._framework_data import sampling_period_of, split_recordings_table
+from ._score_tables import labels_of, one_way_anova
+from ._selector_base import default_estimator
+from ._sources import (
+    RelevanceSource,
+    check_sources,
+    fit_source,
+    source_relevance,
+    source_tables,
+    thesis_sources,
 )
 from .datasets._schema import TARGET
-from .feature_selection import ExhaustiveFeatureSelector, ForwardFeatureSelector, SpearmanSelector
+from .feature_selection import SpearmanSelector
 from .metrics import evaluate_recordings, normalize_performance
 from .metrics import trade_offs as all_trade_offs
 from .state_selection import StateSelector
 
 __all__ = [
+    "RelevanceSource",
     "SelectionReport",
     "candidate_subsets",
     "compare_subsets",
@@ -55,95 +62,6 @@ __all__ = [
     "one_way_anova",
     "select_parameters",
 ]
-
-
-def compare_subsets(
-    X,
-    y,
-    groups,
-    subsets,
-    *,
-    cv,
-    trade_off="50/50",
-    estimator=None,
-    sampling_period=None,
-    n_jobs=None,
-    memory=None,
-    verbose=0,
-):
-    """Fit one model per named feature subset and compare them on the validation recordings.
-
-    Equal subsets are fitted once and compared as one model (D.5 normalisation over the
-    distinct subsets), then reported under every name. Empty subsets are left out with a
-    ``UserWarning`` naming them.
-
-    Parameters
-    ----------
-    X : pandas.DataFrame of shape (n_samples, n_features)
-        Candidate features with their names as columns.
-    y, groups : array-like of shape (n_samples,)
-    subsets : dict
-        Name -> tuple of feature names; at least one must be non-empty.
-    cv : splitter
-        Training/validation split(s), as in the selectors.
-    trade_off : str, default="50/50"
-    estimator, sampling_period, n_jobs, memory, verbose
-        As in the selectors.
-
-    Returns
-    -------
-    scores : pandas.DataFrame
-        One row per (name, recording) with metrics and normalised ``performance_score``.
-    summary : pandas.DataFrame
-        One row per name: mean ``accuracy``, ``smoothness``, ``performance_score`` and
-        ``rank`` (1 = best; ties to fewer features).
-    """
-    names = list(X.columns)
-    values = X.to_numpy(dtype=float)
-    y, groups = np.asarray(y, dtype=float), np.asarray(groups)
-    splits = check_recording_splits(cv, values, y, groups)
-    empty = [name for name, subset in subsets.items() if not len(subset)]
-    if len(empty) == len(subsets):
-        raise ValueError("every subset is empty: nothing to compare")
-    if empty:
-        warnings.warn(
-            f"empty subset(s) {', '.join(map(str, empty))} left out of the comparison: no "
-            "feature to fit (for a candidate subset: no feature reached its threshold)",
-            UserWarning,
-            stacklevel=2,
-        )
-    distinct = list(dict.fromkeys(tuple(s) for s in subsets.values() if len(s)))
-    table = evaluate_models(
-        default_estimator() if estimator is None else estimator,
-        values,
-        y,
-        groups,
-        splits,
-        [(tuple(names.index(f) for f in subset), {}) for subset in distinct],
-        sampling_period=sampling_period,
-        n_jobs=n_jobs,
-        memory=memory,
-        verbose=verbose,
-        desc="candidate subsets",
-    )
-    table.insert(1, "subset", [distinct[i] for i in table["model"]])
-    table.insert(2, "n_features", table["subset"].map(len))
-    scored = rescore_table(table.drop(columns="model"), "subset", trade_off)
-    frames = [
-        scored[scored["subset"] == tuple(subset)].assign(name=name)
-        for name, subset in subsets.items()
-        if len(subset)
-    ]
-    scores = pd.concat(frames, ignore_index=True)
-    summary = scores.groupby(["name", "n_features"], sort=False, as_index=False).agg(
-        accuracy=("accuracy", "mean"),
-        smoothness=("smoothness", "mean"),
-        performance_score=("performance_score", "mean"),
-    )
-    order = summary.sort_values(["performance_score", "n_features"], kind="stable").index
-    summary.loc[order, "rank"] = np.arange(1, len(order) + 1)
-    summary["rank"] = summary["rank"].astype(int)
-    return scores, summary
 
 
 @dataclass
@@ -161,14 +79,10 @@ class SelectionReport:
     filter : DataFrame
         Spearman filter on the training recordings: ``feature``, ``spearman``, ``pvalue``,
         ``rank``, ``selected``.
-    exhaustive : DataFrame
-        Exhaustive wrapper results (subset x validation recording).
-    forward_paths : DataFrame
-        Every step of every forward path (per validation recording and trade-off).
     relevance : DataFrame
-        Feature counts, rows (source, feature), one column per trade-off; the "combined"
-        block is the sum of the two wrappers' counts (the combined candidates are unions of
-        subsets unless ``combined_rule="sum"``).
+        Feature counts, rows (source, feature), one column per trade-off: one block per
+        relevance source and a "combined" block, the sum of their counts (the combined
+        candidates are unions of subsets unless ``combined_rule="sum"``).
     candidates : DataFrame
         The candidate subsets with their mean validation metrics, score and rank, plus the
         baseline (all candidates); an empty candidate stays in the table with ``empty`` True
@@ -191,6 +105,8 @@ class SelectionReport:
         Mean test metrics per model.
     final_model, baseline_model : estimator
         Fitted on the training recordings.
+    sources : dict
+        Relevance source name -> fitted selector.
     timings : dict
         Wall time of every stage, seconds.
     """
@@ -199,8 +115,6 @@ class SelectionReport:
     n_states: int
     trade_off: str
     filter: pd.DataFrame
-    exhaustive: pd.DataFrame
-    forward_paths: pd.DataFrame
     relevance: pd.DataFrame
     candidates: pd.DataFrame
     candidate_scores: pd.DataFrame
@@ -212,7 +126,27 @@ class SelectionReport:
     test_summary: pd.DataFrame
     final_model: object = field(repr=False)
     baseline_model: object = field(repr=False)
+    sources: dict = field(default_factory=dict, repr=False)
     timings: dict = field(default_factory=dict)
+
+    @property
+    def source_tables(self):
+        """Tables of every source: ``<name>_results`` and ``<name>_paths`` when the selector
+        has ``results_`` / ``paths_`` (the package's wrappers), else ``<name>_selected``."""
+        tables = {}
+        for name, selector in self.sources.items():
+            tables.update(source_tables(name, selector))
+        return tables
+
+    @property
+    def exhaustive(self):
+        """Results of the ``"exhaustive"`` source (subset x validation recording), if any."""
+        return self.source_tables.get("exhaustive_results")
+
+    @property
+    def forward_paths(self):
+        """Every step of every path of the ``"forward"`` source, if any."""
+        return self.source_tables.get("forward_paths")
 
     @property
     def empty_candidates(self):
@@ -258,6 +192,7 @@ def select_parameters(
     trade_off="50/50",
     relevance_trade_offs=None,
     combined_rule="union",
+    relevance_sources=None,
     anova_trade_offs=None,
     anova_n_strategies=N_STRATEGIES,
     tol=0.01,
@@ -296,6 +231,16 @@ def select_parameters(
     combined_rule : {"union", "sum"}, default="union"
         How the combined candidates (Strict / Mild / Liberal 3) are formed; see
         :func:`candidate_subsets`. ``"union"`` is the thesis' Table A.2.
+    relevance_sources : mapping of str to selector or RelevanceSource, default=None
+        The selectors whose choices are counted per feature, by name, in the order their
+        candidates are numbered. ``None`` means the thesis' two: ``"exhaustive"``
+        (:class:`~skhmmgmr.feature_selection.ExhaustiveFeatureSelector` on the filter's top
+        features, subsets up to ``max_subset_size``) and ``"forward"``
+        (:class:`~skhmmgmr.feature_selection.ForwardFeatureSelector`, one path per validation
+        recording and trade-off, on all candidates). Each is fitted on the training and
+        validation recordings and receives the framework's parameters it has (``cv``,
+        ``accuracy_weight``, ``smoothness_weight``, ``sampling_period``, ``n_jobs``,
+        ``memory``, ``verbose``, ``trade_offs``); see :class:`RelevanceSource`.
     anova_trade_offs : list of str, default=None
         Trade-offs compared by the ANOVA of the feature relevance (accuracy and smoothness of
         the best exhaustive subsets) and by the accuracy ANOVA of the state selection; each
@@ -338,6 +283,9 @@ def select_parameters(
         labels = [*labels, label]
     anova_labels = check_anova_scope(anova_trade_offs, anova_n_strategies, labels)
     check_combined_rule(combined_rule)
+    if relevance_sources is None:
+        relevance_sources = thesis_sources(estimator, max_subset_size=max_subset_size, tol=tol)
+    sources = check_sources(relevance_sources)
     w1, w2 = (float(w) / 100 for w in label.split("/"))
     train = split == "train"
     search = train | (split == "validation")
@@ -374,28 +322,22 @@ def select_parameters(
 
     # The top features in table order, as the forward step orders every subset: the subsets
     # of the top features that the forward step meets are then the exhaustive step's models.
+    columns = {"all": list(X.columns), "top": [c for c in X.columns if c in top]}
+    shared = {**common, "trade_offs": labels}
+    fitted, relevance_by_source = {}, {}
     with shared_evaluations():
-        exhaustive = ExhaustiveFeatureSelector(estimator, max_features=max_subset_size, **common)
-        exhaustive.fit(X_s[[c for c in X.columns if c in top]], y_s, g_s)
-        lap("exhaustive")
-        forward = ForwardFeatureSelector(
-            estimator, mode="per_recording", tol=tol, trade_offs=labels, **common
-        )
-        forward.fit(X_s, y_s, g_s)
-        lap("forward")
-
-    relevance_one = feature_relevance(exhaustive, labels, features=list(X.columns))
-    relevance_two = feature_relevance(forward, labels, features=list(X.columns))
+        for name, source in sources.items():
+            fitted[name] = fit_source(
+                source, X_s[columns[source.features]], y_s, g_s, shared=shared
+            )
+            relevance_by_source[name] = source_relevance(fitted[name], labels, list(X.columns))
+            lap(name)
     relevance = pd.concat(
-        {
-            "exhaustive": relevance_one,
-            "forward": relevance_two,
-            "combined": relevance_one + relevance_two,
-        },
+        {**relevance_by_source, COMBINED: sum(relevance_by_source.values())},
         names=["source", "feature"],
     )
     candidates = candidate_subsets(
-        relevance_one, relevance_two, label, strict=0.66, mild=0.33, combined_rule=combined_rule
+        relevance_by_source, label, strict=0.66, mild=0.33, combined_rule=combined_rule
     )
     named = dict(zip(candidates["name"], candidates["features"], strict=True))
     named["Baseline"] = tuple(X.columns)
@@ -446,11 +388,14 @@ def select_parameters(
     test_summary["n_states"] = n_states
     lap("test")
 
-    best_exhaustive = exhaustive.best_subsets(labels)
+    # The relevance ANOVA compares the best subsets of the first source that has them per
+    # recording (the thesis: the exhaustive wrapper's).
+    per_recording = [sel for sel in fitted.values() if hasattr(sel, "best_subsets")]
+    best_subsets = per_recording[0].best_subsets(labels) if per_recording else None
     per_k = states.rescore(labels)
     picked = per_k.merge(state_choices[["trade_off", "n_states"]], on=["trade_off", "n_states"])
     anova = framework_anova(
-        best_exhaustive,
+        best_subsets,
         candidate_scores,
         picked,
         strategies=list(candidates["name"]),
@@ -463,8 +408,7 @@ def select_parameters(
         n_states=n_states,
         trade_off=label,
         filter=filter_table,
-        exhaustive=exhaustive.results_,
-        forward_paths=forward.paths_,
+        sources=fitted,
         relevance=relevance,
         candidates=candidate_summary,
         candidate_scores=candidate_scores,

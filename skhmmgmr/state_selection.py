@@ -22,17 +22,14 @@ from numbers import Integral, Real
 import numpy as np
 import pandas as pd
 from sklearn.base import BaseEstimator, RegressorMixin, clone
+from sklearn.exceptions import NotFittedError
 from sklearn.utils.validation import check_is_fitted
 
 from ._compat import Interval, _fit_context
-from ._search import (
-    RecordingSearchMixin,
-    default_estimator,
-    evaluate_models,
-    labels_of,
-    relative_gain,
-    rescore_table,
-)
+from ._docstrings import fill_shared_parameters
+from ._evaluation import evaluate_models
+from ._score_tables import labels_of, relative_gain, rescore_table
+from ._selector_base import RecordingSearchMixin, default_estimator
 from .metrics import trade_offs as all_trade_offs
 
 __all__ = ["StateSelector", "select_n_states", "state_choices"]
@@ -102,6 +99,7 @@ def state_choices(scores, *, tol=0.01, score="performance_score"):
     return choices if "trade_off" in scores.columns else choices.drop(columns="trade_off")
 
 
+@fill_shared_parameters
 class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
     """Choose the number of states K by the thesis' 1% rule on validation recordings.
 
@@ -112,9 +110,7 @@ class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
 
     Parameters
     ----------
-    estimator : estimator, default=None
-        Regressor with an ``n_states`` parameter (see ``param_name``); ``None`` means a seeded
-        :class:`~skhmmgmr.HMMGMRRegressor`. Its input columns are the fixed feature subset.
+    {estimator}
     k_min, k_max : int, default=1, 20
         Range of K.
     tol : float, default=0.01
@@ -123,8 +119,7 @@ class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
         Parameter set to K (e.g. ``"hmmgmrregressor__n_states"`` in a pipeline).
     refit : bool, default=True
         Fit ``best_estimator_`` with the chosen K on all the data.
-    cv, accuracy_weight, smoothness_weight, sampling_period, n_jobs, memory, verbose
-        As in :class:`~skhmmgmr.feature_selection.ExhaustiveFeatureSelector`.
+    {search parameters}
 
     Attributes
     ----------
@@ -216,6 +211,7 @@ class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
         """
         if self.k_min > self.k_max:
             raise ValueError(f"k_min={self.k_min} > k_max={self.k_max}")
+        given = X  # refit on it: best_estimator_ then knows the feature names
         X, y, groups, splits = self._validate_search(X, y, groups)
         estimator = default_estimator() if self.estimator is None else self.estimator
         # Largest K first: the longest fits start at once instead of finishing last on one
@@ -249,7 +245,9 @@ class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
         self.n_states_ = int(self.choices_["n_states"].iloc[0])
         if self.refit:
             self.best_estimator_ = clone(estimator).set_params(**{self.param_name: self.n_states_})
-            self.best_estimator_.fit(X, y, groups=groups)
+            self.best_estimator_.fit(given, y, groups=groups)
+        elif hasattr(self, "best_estimator_"):
+            del self.best_estimator_  # that of an earlier fit: it would predict with a stale K
         return self
 
     def rescore(self, trade_off="50/50"):
@@ -263,7 +261,14 @@ class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
 
     def predict(self, X, groups=None):
         """Predict with ``best_estimator_`` (the chosen K)."""
-        check_is_fitted(self, "best_estimator_")
+        check_is_fitted(self, "results_")
+        if not hasattr(self, "best_estimator_"):
+            raise NotFittedError(
+                f"this StateSelector was fitted with refit=False, so no estimator was refitted "
+                f"with the chosen n_states_={self.n_states_} and it cannot predict: set "
+                "refit=True, or fit the estimator with that number of states yourself"
+            )
+        # fitted on X as given to fit: it checks the number of features and their names
         return self.best_estimator_.predict(X, groups=groups)
 
 

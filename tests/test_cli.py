@@ -228,3 +228,12 @@ def test_select_reports_an_empty_candidate(tmp_path, capsys, monkeypatch):
     candidates = pd.read_csv(output / "candidates.csv").set_index("name")
     assert candidates.loc["Strict 2", "features"] == "(empty)"
     assert "(empty)" in (output / "index.html").read_text()
+
+
+def test_the_data_file_keeps_recording_ids_as_text(tmp_path):
+    """ "7" and "007" are two drives, not one recording 7."""
+    from skhmmgmr.cli import _read_table
+
+    path = tmp_path / "data.csv"
+    path.write_text("recording,time,x,driver_torque\n007,0.0,1.0,0.1\n7,0.0,2.0,0.2\n")
+    assert list(_read_table(path)["recording"]) == ["007", "7"]

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import sklearn
-from scipy import stats
+from scipy import sparse, stats
 from sklearn.base import clone
 from sklearn.feature_selection import SelectKBest, SequentialFeatureSelector
 from sklearn.model_selection import GroupKFold, PredefinedSplit
@@ -14,7 +14,8 @@ from sklearn.pipeline import make_pipeline
 from threadpoolctl import threadpool_limits
 
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr._search import ForwardPath, shared_evaluations
+from skhmmgmr._evaluation import shared_evaluations
+from skhmmgmr._forward_paths import ForwardPath
 from skhmmgmr.feature_selection import (
     ExhaustiveFeatureSelector,
     ForwardFeatureSelector,
@@ -105,6 +106,25 @@ def test_spearman_in_select_k_best_and_selector(data):
     np.testing.assert_allclose(selector.scores_, spearman_relevance(X, y, groups=groups)[0])
     assert list(selector.get_feature_names_out()) == ["f0", "f1"]
     assert selector.pvalues_.shape == (X.shape[1],)
+
+
+def test_spearman_relevance_refuses_non_finite_values_naming_them(data):
+    X, y, groups, _ = data
+    X = X.copy()
+    X.iloc[160, 2] = np.nan  # row 10 of the second recording
+    # a NaN used to drop its recording from the feature's average, silently
+    with pytest.raises(ValueError, match="X contains NaN in column 'f2' of recording 'train1'"):
+        spearman_relevance(X, y, groups=groups)
+    y = y.copy()
+    y[3] = np.inf
+    with pytest.raises(ValueError, match="y contains infinity .* of recording 'train0'"):
+        spearman_relevance(X.fillna(0.0), y, groups=groups)
+
+
+def test_spearman_relevance_refuses_sparse_input_saying_so(data):
+    X, y, groups, _ = data
+    with pytest.raises(TypeError, match="sparse input for X .* X.toarray"):
+        spearman_relevance(sparse.csr_matrix(X.to_numpy()), y, groups=groups)
 
 
 # -- exhaustive wrapper ----------------------------------------------------------------------

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skhmmgmr.datasets import _fetch, clear_data_home, fetch_comma2k19, get_data_home
-from skhmmgmr.datasets._fetch import download, extract, list_members, read_manifest
+from skhmmgmr.datasets import _download, clear_data_home, fetch_comma2k19, get_data_home
+from skhmmgmr.datasets._download import download, extract, list_members, read_manifest
 
 SEGMENT = Path("/work/shared/data/comma2k19/b0c9d2329ad1606b--2018-08-02--08-34-47/40")
 ROUTE = "b0c9d2329ad1606b|2018-08-02--08-34-47"
@@ -202,7 +202,7 @@ def test_interrupted_download_keeps_nothing(tmp_path, monkeypatch):
                 raise KeyboardInterrupt
             return super().read(10)
 
-    monkeypatch.setattr(_fetch, "urlopen", lambda url, timeout: Response(b"x" * 100))
+    monkeypatch.setattr(_download, "urlopen", lambda url, timeout: Response(b"x" * 100))
     with pytest.raises(KeyboardInterrupt):
         fetch_comma2k19(data_home=tmp_path, base_url="http://127.0.0.1:9/", checksums={})
     assert _files(tmp_path) == []

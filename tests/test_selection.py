@@ -8,8 +8,9 @@ from _protocol_data import PERIOD, make_protocol
 from scipy import stats
 from sklearn.model_selection import PredefinedSplit
 
-from skhmmgmr.feature_selection import ExhaustiveFeatureSelector
+from skhmmgmr.feature_selection import ExhaustiveFeatureSelector, ForwardFeatureSelector
 from skhmmgmr.selection import (
+    RelevanceSource,
     SelectionReport,
     candidate_subsets,
     feature_relevance,
@@ -59,7 +60,7 @@ def test_candidate_subsets_are_nested():
     one = pd.DataFrame({"50/50": [10, 5, 3, 1, 0]}, index=list("abcde"))
     two = pd.DataFrame({"50/50": [0, 9, 1, 0, 2]}, index=list("abcde"))
     one.attrs["n_recordings"] = two.attrs["n_recordings"] = 10
-    candidates = candidate_subsets(one, two, labels[0])
+    candidates = candidate_subsets({"exhaustive": one, "forward": two}, labels[0])
     assert list(candidates["name"]) == [
         f"{s} {n}" for n in (1, 2, 3) for s in ("Strict", "Mild", "Liberal")
     ]
@@ -75,7 +76,7 @@ def test_candidate_subsets_are_nested():
     assert by_name["Mild 3"] == ("a", "b")
     assert by_name["Liberal 3"] == tuple("abcde")
     # the summed rule: counts 10, 14, 4, 1, 2 of 20 recordings
-    summed = candidate_subsets(one, two, labels[0], combined_rule="sum")
+    summed = candidate_subsets({"exhaustive": one, "forward": two}, labels[0], combined_rule="sum")
     by_name_summed = dict(zip(summed["name"], summed["features"], strict=True))
     assert by_name_summed["Strict 3"] == ("b",)
     assert by_name_summed["Mild 3"] == ("a", "b")
@@ -176,3 +177,75 @@ def test_exhaustive_search_on_a_dask_cluster(protocol):
         remote = ExhaustiveFeatureSelector(cv=cv, sampling_period=PERIOD, n_jobs=-1)
         remote.fit(X, y, groups=groups)
     pd.testing.assert_frame_equal(remote.results_, local.results_)
+
+
+def test_a_third_relevance_source_joins_without_changing_the_framework(protocol, report):
+    """scikit-learn's own SequentialFeatureSelector, scored by the package's Performance Score
+    on the framework's validation split, counts as a third source: its one subset is counted
+    for every trade-off, it gets Strict/Mild/Liberal candidates numbered 3, the combined ones
+    become number 4 (unions over the three sources), and the thesis' two sources give the same
+    relevance as without it."""
+    import warnings
+
+    import sklearn
+    from sklearn.feature_selection import SequentialFeatureSelector
+
+    from skhmmgmr import HMMGMRRegressor, PerformanceScore
+    from skhmmgmr.metrics import UngroupedScoringWarning
+
+    sfs = SequentialFeatureSelector(
+        HMMGMRRegressor(n_states=2, random_state=0),
+        n_features_to_select=2,
+        scoring=PerformanceScore(0.5, 0.5, sampling_period=PERIOD),
+    )
+    sources = {
+        "exhaustive": RelevanceSource(ExhaustiveFeatureSelector(), features="top"),
+        "forward": ForwardFeatureSelector(mode="per_recording"),
+        "sequential": sfs,
+    }
+    # with metadata routing on, the sequential selector passes the recording ids to its scorer
+    with warnings.catch_warnings(), sklearn.config_context(enable_metadata_routing=True):
+        warnings.simplefilter("error", UngroupedScoringWarning)
+        three = select_parameters(protocol, k_max=3, progress=False, relevance_sources=sources)
+    chosen = tuple(three.sources["sequential"].get_feature_names_out())
+    assert len(chosen) == 2
+    sequential = three.relevance.loc["sequential"]
+    assert (sequential.loc[list(chosen)] == 1).all().all()
+    assert (sequential.drop(index=list(chosen)) == 0).all().all()
+    for name in ("exhaustive", "forward"):
+        pd.testing.assert_frame_equal(three.relevance.loc[name], report.relevance.loc[name])
+    pd.testing.assert_frame_equal(
+        three.relevance.loc["combined"],
+        report.relevance.loc["combined"] + sequential,
+    )
+    candidates = three.candidates.set_index("name")
+    assert candidates.loc["Strict 3", "source"] == "sequential"
+    assert candidates.loc["Strict 3", "features"] == tuple(
+        f for f in three.relevance.loc["sequential"].index if f in chosen
+    )
+    old = report.candidates.set_index("name")
+    for strategy in ("Strict", "Mild", "Liberal"):
+        union = set(old.loc[f"{strategy} 3", "features"]) | set(chosen)
+        assert set(candidates.loc[f"{strategy} 4", "features"]) == union
+        assert candidates.loc[f"{strategy} 4", "source"] == "combined"
+    assert "sequential_selected" in three.source_tables
+    assert {"exhaustive_results", "forward_paths"} <= set(three.source_tables)
+
+
+def test_relevance_sources_are_checked(protocol):
+    with pytest.raises(ValueError, match="non-empty mapping"):
+        select_parameters(protocol, k_max=2, progress=False, relevance_sources={})
+    with pytest.raises(ValueError, match="'combined'"):
+        select_parameters(
+            protocol,
+            k_max=2,
+            progress=False,
+            relevance_sources={"combined": ForwardFeatureSelector()},
+        )
+    with pytest.raises(ValueError, match="features must be one of"):
+        select_parameters(
+            protocol,
+            k_max=2,
+            progress=False,
+            relevance_sources={"a": RelevanceSource(ForwardFeatureSelector(), features="some")},
+        )

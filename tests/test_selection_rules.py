@@ -70,7 +70,9 @@ def as_dict(candidates):
 def test_candidates_from_thesis_counts_are_table_a2():
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no candidate is empty: nothing to warn about
-        candidates = candidate_subsets(*thesis_relevance(), "50/50")
+        candidates = candidate_subsets(
+            dict(zip(("exhaustive", "forward"), thesis_relevance(), strict=True)), "50/50"
+        )
     assert as_dict(candidates) == THESIS_CANDIDATES
     assert not candidates["empty"].any()
     assert list(candidates["n_features"]) == [len(f) for f in candidates["features"]]
@@ -80,7 +82,11 @@ def test_candidates_from_thesis_counts_are_table_a2():
 
 
 def test_summed_counts_rule_keeps_its_old_result():
-    candidates = candidate_subsets(*thesis_relevance(), "50/50", combined_rule="sum")
+    candidates = candidate_subsets(
+        dict(zip(("exhaustive", "forward"), thesis_relevance(), strict=True)),
+        "50/50",
+        combined_rule="sum",
+    )
     found = as_dict(candidates)
     # sources 1 and 2 do not depend on the rule
     for name in ("Strict 1", "Mild 1", "Liberal 1", "Strict 2", "Mild 2", "Liberal 2"):
@@ -104,7 +110,9 @@ def test_summed_counts_rule_keeps_its_old_result():
 )
 def test_candidate_subsets_validates_its_parameters(params, message):
     with pytest.raises(ValueError, match=message):
-        candidate_subsets(*thesis_relevance(), "50/50", **params)
+        candidate_subsets(
+            dict(zip(("exhaustive", "forward"), thesis_relevance(), strict=True)), "50/50", **params
+        )
 
 
 @pytest.fixture(scope="module")

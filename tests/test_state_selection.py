@@ -1,9 +1,12 @@
 """State selection: the 1% rule on validation recordings, BIC, and the GridSearchCV route."""
 
+import warnings
+
 import numpy as np
 import pandas as pd
 import pytest
 import sklearn
+from sklearn.exceptions import NotFittedError
 from sklearn.model_selection import GridSearchCV, GroupKFold, PredefinedSplit
 from threadpoolctl import threadpool_limits
 
@@ -135,3 +138,26 @@ def test_grid_search_over_states_and_trade_offs(data):
         > results["mean_test_neg_performance_100/0"][0]
     )
     assert search.best_params_["n_states"] in (1, 2, 3)
+
+
+def test_predict_after_fit_without_refit_says_why(data):
+    X, y, groups, cv = data
+    selector = StateSelector(k_max=2, cv=cv, sampling_period=PERIOD).fit(X, y, groups=groups)
+    assert hasattr(selector, "best_estimator_")
+    selector.set_params(refit=False).fit(X, y, groups=groups)
+    # the estimator refitted by the first fit is gone: it would predict with a stale K
+    assert not hasattr(selector, "best_estimator_")
+    with pytest.raises(NotFittedError, match="fitted with refit=False"):
+        selector.predict(X, groups=groups)
+
+
+def test_the_refitted_estimator_knows_the_feature_names(data):
+    X, y, groups, cv = data
+    X = pd.DataFrame(X, columns=["speed"])
+    selector = StateSelector(k_max=2, cv=cv, sampling_period=PERIOD).fit(X, y, groups=groups)
+    assert list(selector.best_estimator_.feature_names_in_) == ["speed"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "X has feature names, but ... fitted without"
+        selector.predict(X, groups=groups)
+    with pytest.warns(UserWarning, match="X does not have valid feature names"):
+        selector.predict(X.to_numpy(), groups=groups)

@@ -1,6 +1,7 @@
 """Driving data: an embedded lane-keeping simulator and loaders for public and own recordings."""
 
 from ._base import clear_data_home, get_data_home
+from ._calibration import CALIBRATION_BANDS, THESIS_TABLE_C2, calibration_table
 from ._comma2k19 import load_comma2k19_segment
 from ._driver import DRIVER_STYLES, DriverParameters
 from ._fetch import COMMA2K19_URL, fetch_comma2k19
@@ -16,7 +17,7 @@ from ._schema import (
     TARGET,
     TIME,
 )
-from ._simulator import CALIBRATION_BANDS, THESIS_TABLE_C2, calibration_table, make_lane_keeping
+from ._simulator import make_lane_keeping
 
 __all__ = [
     "CALIBRATION_BANDS",

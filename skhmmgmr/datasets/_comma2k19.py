@@ -12,14 +12,13 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-import pandas as pd
 from scipy.signal import savgol_filter
 
-from ._schema import DRIVER, FEATURE_UNITS, RECORDING, SETTING, SPLIT, TARGET, TIME
+from ._frame import tidy_frame
+from ._schema import DRIVER, RECORDING, TARGET, TIME
 
 BUS = 0
 DRIVER_NAME = "comma2k19"
-SPLIT_NAME = "unknown"
 TORQUE_UNIT = "raw sensor units"
 _SMOOTHING_SECONDS = 0.25
 
@@ -264,8 +263,6 @@ def load_comma2k19_segment(path, *, sampling_rate=20.0, recording=None, eps_torq
     columns = {
         RECORDING: recording,
         DRIVER: DRIVER_NAME,
-        SETTING: np.nan,
-        SPLIT: SPLIT_NAME,
         TIME: grid - start,
         "steering_wheel_angle": on_grid["steering_wheel_angle"] * deg,
         "steering_wheel_velocity": on_grid["steering_wheel_velocity"] * deg,
@@ -281,11 +278,12 @@ def load_comma2k19_segment(path, *, sampling_rate=20.0, recording=None, eps_torq
     if eps_torque:
         columns["eps_torque"] = on_grid["eps_torque"]
     columns[TARGET] = on_grid[TARGET]
-
-    frame = pd.DataFrame(columns)
-    frame.attrs["units"] = _units(eps_torque)
-    frame.attrs["time_origin"] = {recording: float(start)}
-    return frame
+    # setting and split keep the defaults (NaN, "unknown"): comma2k19 defines neither.
+    return tidy_frame(
+        columns,
+        units={"speed": "m/s", "eps_torque": TORQUE_UNIT, TARGET: TORQUE_UNIT},
+        attrs={"time_origin": {recording: float(start)}},
+    )
 
 
 def _sum(first, second):
@@ -302,21 +300,3 @@ def _read_signal(folder):
 
 def _derivative(values, sampling_rate, window):
     return savgol_filter(values, window, polyorder=2, deriv=1, delta=1.0 / sampling_rate)
-
-
-def _units(eps_torque):
-    units = {TIME: "s"}
-    for name in (
-        "steering_wheel_angle",
-        "steering_wheel_velocity",
-        "steering_wheel_acceleration",
-        "lateral_acceleration",
-        "yaw_rate",
-        "yaw_acceleration",
-    ):
-        units[name] = FEATURE_UNITS[name]
-    units["speed"] = "m/s"
-    if eps_torque:
-        units["eps_torque"] = TORQUE_UNIT
-    units[TARGET] = TORQUE_UNIT
-    return units

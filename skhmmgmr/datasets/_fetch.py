@@ -1,31 +1,17 @@
-"""Download, verify and unpack dataset archives without ever leaving a half-written file.
+"""Fetcher of the comma2k19 driving dataset: its chunk archives, segments and cache layout.
 
-Also the fetcher of the comma2k19 driving dataset, built on these helpers.
+The generic download, verification and unpacking helpers are in :mod:`._download`.
 """
 
-import hashlib
 import numbers
-import os
 import re
-import shutil
-import tarfile
-import tempfile
 import warnings
-import zipfile
-from http.client import IncompleteRead
-from pathlib import Path, PurePosixPath
-from urllib.error import HTTPError, URLError
-from urllib.parse import urljoin, urlsplit
-from urllib.request import urlopen
-
-import pandas as pd
+from pathlib import Path
 
 from ._base import get_data_home
 from ._comma2k19 import ROUTE_PATTERN, check_sampling_rate, load_comma2k19_segment
-
-_CHUNK_SIZE = 1 << 20
-_SCHEMES = ("http", "https", "file")
-_SHA256 = re.compile(r"^[0-9a-fA-F]{64}$")
+from ._download import atomic_open, download, extract_folders, file_url, list_members, read_manifest
+from ._frame import concat_frames
 
 COMMA2K19_URL = "https://huggingface.co/datasets/commaai/comma2k19/resolve/main/"
 N_CHUNKS = 10
@@ -33,198 +19,6 @@ _SEGMENT_ID = re.compile(
     r"^(?P<dongle>[0-9a-f]{16})(?:\||_|--)(?P<start>\d{4}-\d\d-\d\d--\d\d-\d\d-\d\d)"
     r"(?:/|--)(?P<number>\d+)/?$"
 )
-
-
-def _check_url(url):
-    scheme = urlsplit(url).scheme
-    if scheme not in _SCHEMES:
-        raise ValueError(f"Cannot download {url!r}: only {', '.join(_SCHEMES)} URLs are supported.")
-
-
-def _check_sha256(sha256, name):
-    if not isinstance(sha256, str) or not _SHA256.match(sha256):
-        raise ValueError(
-            f"The SHA-256 checksum given for {name!r} must be 64 hexadecimal digits, "
-            f"got {sha256!r}."
-        )
-    return sha256.lower()
-
-
-def file_url(base_url, name):
-    """Return the URL of the file ``name`` in the folder ``base_url``."""
-    if not base_url.endswith("/"):
-        base_url += "/"
-    return urljoin(base_url, name)
-
-
-def download(url, path, *, sha256=None, timeout=60.0):
-    """Download ``url`` to ``path`` through a temporary file in the same folder.
-
-    The bytes go to a hidden temporary file next to ``path``, which is renamed to ``path``
-    (atomically) only once the whole body was received and, when ``sha256`` is given, its
-    checksum matches. On any failure, including a ``KeyboardInterrupt``, the temporary file is
-    deleted, so ``path`` either does not exist or holds the complete, verified file.
-
-    Parameters
-    ----------
-    url : str
-        An ``http``, ``https`` or ``file`` URL.
-    path : str or path-like
-        Where the file goes; its folder is created if needed.
-    sha256 : str, default=None
-        Expected hexadecimal SHA-256 digest of the file; not checked when None.
-    timeout : float, default=60.0
-        Seconds to wait for the server at each read.
-
-    Returns
-    -------
-    sha256 : str
-        Hexadecimal SHA-256 digest of the downloaded file.
-    """
-    _check_url(url)
-    path = Path(path)
-    expected = None if sha256 is None else _check_sha256(sha256, path.name)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    try:
-        digest = hashlib.sha256()
-        n_bytes = 0
-        with os.fdopen(fd, "wb") as tmp, urlopen(url, timeout=timeout) as response:
-            length = response.headers.get("Content-Length")
-            try:
-                for block in iter(lambda: response.read(_CHUNK_SIZE), b""):
-                    tmp.write(block)
-                    digest.update(block)
-                    n_bytes += len(block)
-            except IncompleteRead as exc:
-                n_bytes += len(exc.partial)
-        if length is not None and n_bytes != int(length):
-            raise OSError(
-                f"Download of {url!r} stopped after {n_bytes} of {int(length)} bytes; "
-                "nothing was kept. Try again."
-            )
-        actual = digest.hexdigest()
-        if expected is not None and actual != expected:
-            raise OSError(
-                f"Checksum mismatch for {url!r}: expected SHA-256 {expected}, got {actual}. "
-                "The file is corrupted or is not the expected version; nothing was kept."
-            )
-        os.replace(tmp_name, path)
-    except BaseException:
-        Path(tmp_name).unlink(missing_ok=True)
-        raise
-    return actual
-
-
-def read_manifest(base_url, name="SHA256SUMS", *, timeout=60.0):
-    """Read a checksum manifest in ``sha256sum`` format from the folder ``base_url``.
-
-    Returns a mapping file name -> hexadecimal SHA-256 digest, or None when the folder has no
-    manifest.
-    """
-    url = file_url(base_url, name)
-    _check_url(url)
-    try:
-        with urlopen(url, timeout=timeout) as response:
-            text = response.read().decode("utf-8")
-    except HTTPError as exc:
-        if exc.code == 404:
-            return None
-        raise
-    except URLError as exc:
-        if isinstance(exc.reason, FileNotFoundError):
-            return None
-        raise
-    checksums = {}
-    for line_number, line in enumerate(text.splitlines(), start=1):
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
-        parts = line.split(maxsplit=1)
-        if len(parts) != 2:
-            raise ValueError(f"Line {line_number} of the manifest {url!r} is malformed: {line!r}.")
-        digest, file_name = parts
-        checksums[file_name.strip().lstrip("*")] = _check_sha256(digest, file_name)
-    return checksums
-
-
-def _member_parts(name, archive):
-    """Split an archive member name into path parts, refusing names that escape the folder."""
-    posix = PurePosixPath(name.replace("\\", "/"))
-    parts = [p for p in posix.parts if p not in ("", ".")]
-    if posix.is_absolute() or ".." in parts or (parts and re.match(r"^[A-Za-z]:$", parts[0])):
-        raise ValueError(
-            f"Refusing to unpack {archive}: its member {name!r} would be written outside the "
-            "target folder."
-        )
-    return tuple(parts)
-
-
-def list_members(archive):
-    """Return the path parts of every regular file in a zip or tar archive.
-
-    Raises a ValueError if any member name is absolute or contains ``..``.
-    """
-    archive = Path(archive)
-    if zipfile.is_zipfile(archive):
-        with zipfile.ZipFile(archive) as zf:
-            infos = zf.infolist()
-            return [_member_parts(i.filename, archive.name) for i in infos if not i.is_dir()]
-    if tarfile.is_tarfile(archive):
-        with tarfile.open(archive) as tf:
-            members = tf.getmembers()
-            for m in members:
-                _member_parts(m.name, archive.name)
-            return [_member_parts(m.name, archive.name) for m in members if m.isfile()]
-    raise ValueError(f"{archive} is neither a zip nor a tar archive.")
-
-
-def extract(archive, destinations):
-    """Unpack selected regular files of a zip or tar archive.
-
-    Parameters
-    ----------
-    archive : path-like
-        The zip or tar (optionally compressed) archive.
-    destinations : callable
-        Called with the path parts of every regular file; returns the path where the file
-        goes, or None to skip it. Links and special files are never unpacked.
-
-    Notes
-    -----
-    The caller writes into a fresh temporary folder and renames it into place, so that a
-    failure never leaves a partly unpacked folder where the cache expects a complete one.
-    """
-    archive = Path(archive)
-    if zipfile.is_zipfile(archive):
-        with zipfile.ZipFile(archive) as zf:
-            for info in zf.infolist():
-                if info.is_dir():
-                    continue
-                # A zip written on Unix can mark a member as a symbolic link.
-                if (info.external_attr >> 16) & 0o170000 == 0o120000:
-                    continue
-                target = destinations(_member_parts(info.filename, archive.name))
-                if target is not None:
-                    _copy_member(zf.open(info), target)
-        return
-    if tarfile.is_tarfile(archive):
-        with tarfile.open(archive) as tf:
-            for member in tf:
-                parts = _member_parts(member.name, archive.name)
-                if not member.isfile():
-                    continue
-                target = destinations(parts)
-                if target is not None:
-                    _copy_member(tf.extractfile(member), target)
-        return
-    raise ValueError(f"{archive} is neither a zip nor a tar archive.")
-
-
-def _copy_member(source, target):
-    target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with source, open(target, "wb") as out:
-        shutil.copyfileobj(source, out, _CHUNK_SIZE)
 
 
 def _segment_key(identifier):
@@ -322,41 +116,20 @@ class _Chunks:
             for k in keys
             if (wanted is None or k in wanted) and not _segment_folder(self.root, k).is_dir()
         }
-        if not todo:
-            return keys
-        # Unpack into a hidden folder first: a segment folder in the cache is always complete.
-        tmp = Path(tempfile.mkdtemp(prefix=".unpacking-", dir=self.root))
-        try:
+        if todo:
 
-            def destination(parts):
+            def folder_of(parts):
                 found = _key_of_member(parts)
                 if found is None or found[0] not in todo or not found[1]:
                     return None
-                return _segment_folder(tmp, found[0]).joinpath(*found[1])
+                return _segment_folder(Path(), found[0]), found[1]
 
-            extract(archive, destination)
-            for key in todo:
-                final = _segment_folder(self.root, key)
-                final.parent.mkdir(parents=True, exist_ok=True)
-                try:
-                    _segment_folder(tmp, key).rename(final)
-                except OSError:
-                    if not final.is_dir():  # else another process unpacked it meanwhile
-                        raise
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
+            extract_folders(archive, self.root, folder_of)
         return keys
 
     def _write_index(self, chunk, keys):
-        path = self.index_path(chunk)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=self.root)
-        try:
-            with open(fd, "w") as f:
-                f.write("".join(f"{_name(k)}\n" for k in keys))
-            Path(tmp).replace(path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with atomic_open(self.index_path(chunk)) as f:
+            f.write("".join(f"{_name(k)}\n" for k in keys))
 
 
 def fetch_comma2k19(
@@ -481,12 +254,8 @@ def fetch_comma2k19(
     ]
     if not parts:
         raise ValueError(f"The comma2k19 chunk(s) {chunk_numbers} hold no segment.")
-    frame = pd.concat(parts, ignore_index=True)
-    frame.attrs = {
-        "units": dict(parts[0].attrs["units"]),
-        "time_origin": {k: v for p in parts for k, v in p.attrs["time_origin"].items()},
-    }
-    return frame
+    origins = {k: v for p in parts for k, v in p.attrs["time_origin"].items()}
+    return concat_frames(parts, attrs={"time_origin": origins})
 
 
 def _drop_archive(store, chunk, keep_archive):

@@ -3,12 +3,11 @@
 import numbers
 
 import numpy as np
-import pandas as pd
 from joblib import Parallel, delayed
 from sklearn.utils import check_random_state
 
 from ._driver import DRIVER_STYLES
-from ._schema import FEATURE_UNITS, TARGET, TARGET_UNIT, TIME
+from ._frame import concat_frames
 from ._sensors import check_sensor_noise
 from ._simulator import make_lane_keeping
 
@@ -142,12 +141,11 @@ def make_driving_protocol(
                 cache=cache,
             )
             jobs.append(delayed(make_lane_keeping)(**kwargs))
-    frames = Parallel(n_jobs=n_jobs)(jobs)
-    frame = pd.concat(frames, ignore_index=True)
-    frame.attrs = {
-        "units": {TIME: "s", **FEATURE_UNITS, TARGET: TARGET_UNIT},
-        "scenario": scenario,
-        "speed": speed_kmh / 3.6,
-        "sensor_noise": check_sensor_noise(sensor_noise),
-    }
-    return frame
+    return concat_frames(
+        Parallel(n_jobs=n_jobs)(jobs),
+        attrs={
+            "scenario": scenario,
+            "speed": speed_kmh / 3.6,
+            "sensor_noise": check_sensor_noise(sensor_noise),
+        },
+    )

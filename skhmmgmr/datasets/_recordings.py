@@ -6,14 +6,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ._schema import DRIVER, FEATURE_UNITS, RECORDING, SETTING, SPLIT, TARGET, TARGET_UNIT, TIME
+from ._frame import META_DEFAULTS, tidy_frame
+from ._schema import DRIVER, RECORDING, SETTING, SPLIT, TARGET, TIME
 
-UNKNOWN = "unknown"
 _CSV_SUFFIXES = (".csv", ".csv.gz", ".csv.bz2", ".csv.zip", ".csv.xz")
 _PARQUET_SUFFIXES = (".parquet", ".pq")
 _SOURCE = "__source__"
 _ROW = "__row__"
-_STEP_RTOL = 0.01
 
 
 def _suffix(path):
@@ -24,7 +23,7 @@ def _suffix(path):
     return None
 
 
-def _sources(data):
+def _sources(data, recording):
     """Yield (description, frame, recording id when the frame has no recording column)."""
     if isinstance(data, pd.DataFrame):
         yield "the DataFrame", data, None
@@ -61,7 +60,11 @@ def _sources(data):
                 f"{stem!r}: rename one of them or give the files a recording column."
             )
         stems[stem] = path
-        frame = pd.read_csv(path) if suffix in _CSV_SUFFIXES else pd.read_parquet(path)
+        if suffix in _CSV_SUFFIXES:
+            # Ids are text: read as numbers, "007" and "7" would be one recording.
+            frame = pd.read_csv(path, dtype={recording: str, DRIVER: str, SPLIT: str})
+        else:
+            frame = pd.read_parquet(path)
         yield f"file {str(path)!r}", frame, stem
 
 
@@ -110,7 +113,8 @@ def _select(description, frame, stem, *, recording, time, target, features):
         if recording in available
         else np.full(n_rows, stem, dtype=object),
     }
-    for name, fill in ((DRIVER, UNKNOWN), (SETTING, np.nan), (SPLIT, UNKNOWN)):
+    # Filled per source, so that sources with and without these columns can be joined.
+    for name, fill in META_DEFAULTS.items():
         out[name] = frame[name].to_numpy() if name in available else np.full(n_rows, fill)
     out[TIME] = frame[time].to_numpy(dtype=float)
     for column in features:
@@ -119,56 +123,6 @@ def _select(description, frame, stem, *, recording, time, target, features):
     out[_SOURCE] = np.full(n_rows, description, dtype=object)
     out[_ROW] = np.arange(n_rows)
     return pd.DataFrame(out), list(features)
-
-
-def _where(frame, i):
-    row = frame.iloc[i]
-    return (
-        f"recording {row[RECORDING]!r} ({row[_SOURCE]}, row {int(row[_ROW])}, "
-        f"time {float(row[TIME]):.10g})"
-    )
-
-
-def _check_finite(frame, columns):
-    values = frame[columns].to_numpy(dtype=float)
-    bad = ~np.isfinite(values)
-    if bad.any():
-        i, j = (int(k[0]) for k in np.nonzero(bad))
-        kind = "NaN" if np.isnan(values[i, j]) else "an infinite value"
-        raise ValueError(
-            f"The column {columns[j]!r} holds {kind} in {_where(frame, i)}; "
-            f"{int(bad.sum())} non-finite value(s) in all. Fill or drop them first."
-        )
-
-
-def _check_time(frame, sampling_rate):
-    recordings = frame[RECORDING].to_numpy()
-    time = frame[TIME].to_numpy()
-    same = recordings[1:] == recordings[:-1]
-    step = np.diff(time)
-    for mask, problem in (
-        (same & (step < 0), "goes back in time"),
-        (same & (step == 0), "repeats the time of the previous row"),
-    ):
-        if mask.any():
-            i = int(np.flatnonzero(mask)[0]) + 1
-            raise ValueError(
-                f"The row of {_where(frame, i)} {problem} (previous time {time[i - 1]:.10g}). "
-                "Rows of a recording must have strictly increasing times."
-            )
-    if sampling_rate is None:
-        return
-    period = 1.0 / sampling_rate
-    off = same & (np.abs(step - period) > _STEP_RTOL * period)
-    if off.any():
-        i = int(np.flatnonzero(off)[0]) + 1
-        steps = step[same & (recordings[1:] == recordings[i])]
-        raise ValueError(
-            f"The recording {recordings[i]!r} is not sampled at {sampling_rate} Hz: the row of "
-            f"{_where(frame, i)} comes {step[i - 1]:.6g} s after the previous one instead of "
-            f"{period:.6g} s (the median step of the recording is {np.median(steps):.6g} s). "
-            "Resample the recording first, or pass sampling_rate=None."
-        )
 
 
 def load_recordings(
@@ -217,8 +171,9 @@ def load_recordings(
     -------
     frame : pandas.DataFrame
         Columns ``recording``, ``driver``, ``setting``, ``split``, ``time``, the features, and
-        ``driver_torque``; the recording ids are strings. Rows of a recording are contiguous,
-        in their original order; recordings come in the order they first appear.
+        ``driver_torque``; recording ids, drivers and splits are text (read as text from CSV
+        files, so that ``"007"`` and ``"7"`` stay two recordings). Rows of a recording are
+        contiguous, in their original order; recordings come in the order they first appear.
         ``attrs["units"]`` maps the time, feature and target columns to their units.
 
     Raises
@@ -226,8 +181,9 @@ def load_recordings(
     ValueError
         Naming the file, recording, column and first offending row (0-based, among the data
         rows of its source) and time, when a column is missing, a value is NaN or infinite,
-        times do not strictly increase within a recording (unsorted or duplicated), a
-        recording is not sampled at ``sampling_rate``, or one recording id is in two files.
+        a recording id, driver or split is empty, times do not strictly increase within a
+        recording (unsorted or duplicated), a recording is not sampled at ``sampling_rate``,
+        or one recording id is in two files.
 
     Notes
     -----
@@ -259,7 +215,7 @@ def load_recordings(
     if isinstance(features, str):
         features = [features]
     parts, feature_names, first = [], None, None
-    for description, frame, stem in _sources(data):
+    for description, frame, stem in _sources(data, recording):
         part, names = _select(
             description,
             frame,
@@ -288,15 +244,11 @@ def load_recordings(
 
     order = pd.factorize(frame[RECORDING])[0]
     frame = frame.iloc[np.argsort(order, kind="stable")].reset_index(drop=True)
-    _check_finite(frame, [TIME, *feature_names, TARGET])
-    _check_time(frame, sampling_rate)
-
-    frame = frame.drop(columns=[_SOURCE, _ROW])
-    frame[RECORDING] = frame[RECORDING].astype(str)
     renamed = {time: TIME, target: TARGET}
-    all_units = {TIME: "s", TARGET: TARGET_UNIT}
-    all_units.update({name: FEATURE_UNITS.get(name, UNKNOWN) for name in feature_names})
-    for name, unit in (units or {}).items():
-        all_units[renamed.get(name, name)] = unit
-    frame.attrs["units"] = {c: all_units[c] for c in [TIME, *feature_names, TARGET]}
-    return frame
+    return tidy_frame(
+        frame.drop(columns=[_SOURCE, _ROW]),
+        units={renamed.get(name, name): unit for name, unit in (units or {}).items()},
+        sampling_rate=sampling_rate,
+        source=frame[_SOURCE].to_numpy(),
+        row=frame[_ROW].to_numpy(),
+    )

@@ -1,0 +1,59 @@
+"""Smoke test of an installed skhmmgmr (wheel or sdist), run by .ci/run outside the checkout.
+
+Imports the package, checks the version, fits and predicts on a short simulated recording and
+runs the command line's help. Exits non-zero on any failure.
+"""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import skhmmgmr
+from skhmmgmr import HMMGMRRegressor
+from skhmmgmr.datasets import make_lane_keeping
+
+EXPECTED_VERSION = "0.1.0"
+
+
+def check(condition, message):
+    """Fail with ``message`` (an ``assert`` would vanish under ``python -O``)."""
+    if not condition:
+        sys.exit(f"smoke test FAILED: {message}")
+
+
+def main():
+    location = Path(skhmmgmr.__file__).resolve().parent
+    print(f"skhmmgmr {skhmmgmr.__version__} from {location}")
+    check("site-packages" in location.parts, f"not the installed package: {location}")
+    check(
+        skhmmgmr.__version__ == EXPECTED_VERSION,
+        f"version {skhmmgmr.__version__!r}, expected {EXPECTED_VERSION!r}",
+    )
+
+    data = make_lane_keeping(30.0, sampling_rate=20.0, random_state=0)
+    X = data[["steering_wheel_angle", "yaw_rate"]].to_numpy()
+    y = data["driver_torque"].to_numpy()
+    model = HMMGMRRegressor(n_states=2, random_state=0).fit(X, y)
+    y_hat = model.predict(X)
+    check(y_hat.shape == y.shape, f"prediction shape {y_hat.shape}, expected {y.shape}")
+    check(np.all(np.isfinite(y_hat)), "non-finite predictions")
+    r2 = model.score(X, y)
+    print(f"fit/predict: {X.shape[0]} rows x {X.shape[1]} features, K=2, R^2 = {r2:.3f}")
+    check(r2 > 0.5, f"R^2 {r2:.3f} is not above 0.5")
+
+    # the console script of this environment (beside its python), whatever PATH holds
+    executable = Path(sys.executable).with_name("skhmmgmr")
+    check(executable.is_file(), f"no skhmmgmr command in {executable.parent}")
+    for command in ([str(executable), "--help"], [sys.executable, "-m", "skhmmgmr", "--help"]):
+        result = subprocess.run(command, capture_output=True, text=True)
+        shown = " ".join([Path(command[0]).name, *command[1:]])
+        check(result.returncode == 0, f"{shown}: exit status {result.returncode}\n{result.stderr}")
+        check("usage:" in result.stdout, f"{shown}: no usage line\n{result.stdout}")
+        print(f"{shown}: exit status 0")
+    print("smoke test passed")
+
+
+if __name__ == "__main__":
+    main()

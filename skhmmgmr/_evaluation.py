@@ -1,0 +1,216 @@
+"""Evaluations of the selection: fit a model per split and score it on every validation recording.
+
+One evaluation = fit a clone of the estimator on the training recordings of a split (optionally on
+a subset of the columns, with changed parameters) and score its causal estimate on every
+validation recording of that split. Evaluations run through joblib (any backend, including
+dask's), can be cached with :class:`joblib.Memory`, are shared between the steps of one framework
+run (:func:`shared_evaluations`), and come back as one tidy table with one row per (model,
+validation recording).
+"""
+
+import contextvars
+import numbers
+import os
+import tempfile
+import warnings
+from contextlib import contextmanager
+
+import joblib
+import numpy as np
+import pandas as pd
+from sklearn.base import clone
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.model_selection import GroupKFold, check_cv
+from sklearn.utils.validation import check_memory
+from threadpoolctl import threadpool_limits
+from tqdm.auto import tqdm
+
+from .metrics import evaluate_recordings
+
+METRICS = ["rmse", "accuracy", "smoothness"]
+
+# Evaluations shared between the search steps of one framework run (see shared_evaluations).
+_SHARED_EVALUATIONS = contextvars.ContextVar("skhmmgmr_shared_evaluations", default=None)
+
+
+@contextmanager
+def shared_evaluations():
+    """Within this block, a feature subset evaluated by one search step is not refitted by
+    another.
+
+    A model is reused when the estimator, the training and validation recordings (``y``,
+    ``groups`` and the splits), the sampling period and the subset's feature *names*, in the
+    same order, are the same; the feature columns themselves are identified by their names,
+    so the block must only hold searches over one data table (as in
+    :func:`~skhmmgmr.select_parameters`, whose forward step meets many subsets of the top
+    features that its exhaustive step has already evaluated).
+    """
+    token = _SHARED_EVALUATIONS.set({})
+    try:
+        yield
+    finally:
+        _SHARED_EVALUATIONS.reset(token)
+
+
+# --------------------------------------------------------------------------------------------
+# Splits and evaluation
+# --------------------------------------------------------------------------------------------
+
+
+def shared_evaluation_store():
+    """The evaluations shared in the current :func:`shared_evaluations` block, else None.
+
+    A dict ``{(context, subset names): table}`` that the searches read and add to.
+    """
+    return _SHARED_EVALUATIONS.get()
+
+
+def check_recording_splits(cv, X, y, groups):
+    """Return a list of ``(train, validation)`` row indices, each recording validated once.
+
+    An integer means ``GroupKFold(cv)``. The thesis' fixed validation set is
+    ``PredefinedSplit(test_fold)`` with ``test_fold`` 0 on validation rows and -1 elsewhere.
+    """
+    if isinstance(cv, numbers.Integral):
+        if groups is None:
+            raise ValueError(
+                f"cv={cv} splits the recordings with GroupKFold and needs groups (one recording "
+                "id per row); give groups, or a splitter such as PredefinedSplit"
+            )
+        cv = GroupKFold(n_splits=cv)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="The groups parameter is ignored")
+        splits = [
+            (np.asarray(train), np.asarray(val))
+            for train, val in check_cv(cv).split(X, y, groups=groups)
+        ]
+    if not splits:
+        raise ValueError("cv produced no split")
+    groups = np.zeros(len(y), dtype=int) if groups is None else np.asarray(groups)
+    seen = {}
+    for fold, (train, val) in enumerate(splits):
+        if len(train) == 0 or len(val) == 0:
+            raise ValueError(f"split {fold} has no training or no validation rows")
+        for rec in pd.unique(groups[val]):
+            if rec in seen:
+                raise ValueError(
+                    f"recording {rec!r} is validated in splits {seen[rec]} and {fold}; every "
+                    "validation recording must be scored by exactly one model per candidate "
+                    "(use GroupKFold or PredefinedSplit, not a shuffling splitter)"
+                )
+            seen[rec] = fold
+    return splits
+
+
+def _fit_and_evaluate(
+    folds, data_token, fold, estimator, columns, params, sampling_period, with_bic
+):
+    # ``folds`` is left out of the cache key; ``data_token`` stands for it.
+    X_train, y_train, groups_train, X_val, y_val, groups_val = folds[fold]
+    columns = list(columns)
+    model = clone(estimator).set_params(**params)
+    X_fit = X_train[:, columns]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        model.fit(X_fit, y_train, groups=groups_train)
+    table = evaluate_recordings(
+        y_val,
+        model.predict(X_val[:, columns], groups=groups_val),
+        groups=groups_val,
+        sampling_period=sampling_period,
+    )
+    table.insert(0, "fold", fold)
+    table["converged"] = bool(getattr(model, "converged_", True))
+    if with_bic:
+        table["bic"] = model.bic(X_fit, y_train, groups=groups_train)
+    return table
+
+
+def _fold_arrays(X, y, codes, splits):
+    """Training and validation arrays of every split, sliced once for all models."""
+    return [(X[train], y[train], codes[train], X[val], y[val], codes[val]) for train, val in splits]
+
+
+@contextmanager
+def _shared_with_workers(folds, n_jobs):
+    """The fold arrays as read-only memory maps when models are fitted in other processes.
+
+    joblib would otherwise hash and copy the data for every model it sends to a worker; a
+    memory-mapped array is sent as its file name.
+    """
+    if n_jobs in (None, 1):
+        yield folds
+        return
+    with tempfile.TemporaryDirectory(prefix="skhmmgmr-", ignore_cleanup_errors=True) as folder:
+        path = os.path.join(folder, "folds.joblib")
+        joblib.dump(folds, path)
+        yield joblib.load(path, mmap_mode="r")
+
+
+def evaluate_models(
+    estimator,
+    X,
+    y,
+    groups,
+    splits,
+    models,
+    *,
+    sampling_period,
+    with_bic=False,
+    n_jobs=None,
+    memory=None,
+    verbose=0,
+    desc="models",
+):
+    """Fit and evaluate every model on every split.
+
+    Parameters
+    ----------
+    models : list of (columns, params)
+        Column indices of ``X`` and estimator parameters of every model.
+
+    Returns
+    -------
+    table : pandas.DataFrame
+        Columns ``model`` (index in ``models``), ``fold``, ``recording``, ``n_samples``,
+        ``rmse``, ``accuracy``, ``smoothness``, ``converged`` (and ``bic`` of the training
+        recordings when ``with_bic``).
+    """
+    memory = check_memory(memory)
+    token = None
+    if getattr(memory, "location", None) is not None:
+        token = joblib.hash((X, y, groups, [(t, v) for t, v in splits]))
+    task = memory.cache(_fit_and_evaluate, ignore=["folds"])
+    estimator = clone(estimator)
+    # Recordings travel as integer codes: string ids would be pickled for every model and
+    # re-encoded by every fit.
+    codes, recording_ids = pd.factorize(np.asarray(groups), sort=False)
+    n_tasks = len(models) * len(splits)
+    with _shared_with_workers(_fold_arrays(X, y, codes, splits), n_jobs) as folds:
+        jobs = (
+            joblib.delayed(task)(
+                folds=folds,
+                data_token=token,
+                fold=fold,
+                estimator=estimator,
+                columns=tuple(int(c) for c in columns),
+                params=dict(params),
+                sampling_period=sampling_period,
+                with_bic=with_bic,
+            )
+            for columns, params in models
+            for fold in range(len(splits))
+        )
+        parallel = joblib.Parallel(n_jobs=n_jobs, return_as="generator")
+        # The models are small: BLAS and OpenMP threads (k-means) on them only spin, and
+        # the parallelism is over models (joblib workers get their own limits).
+        with threadpool_limits(limits=1):
+            tables = list(tqdm(parallel(jobs), total=n_tasks, desc=desc, disable=not verbose))
+    if not tables:
+        return pd.DataFrame(columns=["model", "fold", "recording", "n_samples", *METRICS])
+    model_ids = np.repeat(np.arange(len(models)), len(splits))
+    for model_id, table in zip(model_ids, tables, strict=True):
+        table.insert(0, "model", model_id)
+    table = pd.concat(tables, ignore_index=True)
+    table["recording"] = recording_ids[table["recording"].to_numpy(dtype=int)]
+    return table

@@ -1,0 +1,337 @@
+"""Download, verify and unpack files without ever leaving a half-written one in place.
+
+Everything here is generic: the dataset fetchers (such as :mod:`._fetch` for comma2k19) add the
+URLs, file names and archive layouts.
+"""
+
+import hashlib
+import os
+import re
+import shutil
+import tarfile
+import tempfile
+import zipfile
+from contextlib import contextmanager
+from http.client import IncompleteRead
+from pathlib import Path, PurePosixPath
+from urllib.error import HTTPError, URLError
+from urllib.parse import urljoin, urlsplit
+from urllib.request import urlopen
+
+_CHUNK_SIZE = 1 << 20
+_SCHEMES = ("http", "https", "file")
+_SHA256 = re.compile(r"^[0-9a-fA-F]{64}$")
+
+
+def _check_url(url):
+    scheme = urlsplit(url).scheme
+    if scheme not in _SCHEMES:
+        raise ValueError(f"Cannot download {url!r}: only {', '.join(_SCHEMES)} URLs are supported.")
+
+
+def _check_sha256(sha256, name):
+    if not isinstance(sha256, str) or not _SHA256.match(sha256):
+        raise ValueError(
+            f"The SHA-256 checksum given for {name!r} must be 64 hexadecimal digits, "
+            f"got {sha256!r}."
+        )
+    return sha256.lower()
+
+
+def file_url(base_url, name):
+    """Return the URL of the file ``name`` in the folder ``base_url``.
+
+    Parameters
+    ----------
+    base_url : str
+        URL of a folder, with or without the final ``/``.
+    name : str
+        File name in that folder.
+
+    Returns
+    -------
+    url : str
+        The file's URL.
+    """
+    if not base_url.endswith("/"):
+        base_url += "/"
+    return urljoin(base_url, name)
+
+
+def download(url, path, *, sha256=None, timeout=60.0):
+    """Download ``url`` to ``path`` through a temporary file in the same folder.
+
+    The bytes go to a hidden temporary file next to ``path``, which is renamed to ``path``
+    (atomically) only once the whole body was received and, when ``sha256`` is given, its
+    checksum matches. On any failure, including a ``KeyboardInterrupt``, the temporary file is
+    deleted, so ``path`` either does not exist or holds the complete, verified file.
+
+    Parameters
+    ----------
+    url : str
+        An ``http``, ``https`` or ``file`` URL.
+    path : str or path-like
+        Where the file goes; its folder is created if needed.
+    sha256 : str, default=None
+        Expected hexadecimal SHA-256 digest of the file; not checked when None.
+    timeout : float, default=60.0
+        Seconds to wait for the server at each read.
+
+    Returns
+    -------
+    sha256 : str
+        Hexadecimal SHA-256 digest of the downloaded file.
+    """
+    _check_url(url)
+    path = Path(path)
+    expected = None if sha256 is None else _check_sha256(sha256, path.name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    digest = hashlib.sha256()
+    n_bytes = 0
+    with atomic_open(path, "wb", suffix=".part") as out:
+        with urlopen(url, timeout=timeout) as response:
+            length = response.headers.get("Content-Length")
+            try:
+                for block in iter(lambda: response.read(_CHUNK_SIZE), b""):
+                    out.write(block)
+                    digest.update(block)
+                    n_bytes += len(block)
+            except IncompleteRead as exc:
+                n_bytes += len(exc.partial)
+        if length is not None and n_bytes != int(length):
+            raise OSError(
+                f"Download of {url!r} stopped after {n_bytes} of {int(length)} bytes; "
+                "nothing was kept. Try again."
+            )
+        actual = digest.hexdigest()
+        if expected is not None and actual != expected:
+            raise OSError(
+                f"Checksum mismatch for {url!r}: expected SHA-256 {expected}, got {actual}. "
+                "The file is corrupted or is not the expected version; nothing was kept."
+            )
+    return actual
+
+
+def read_manifest(base_url, name="SHA256SUMS", *, timeout=60.0):
+    """Read a checksum manifest in ``sha256sum`` format from the folder ``base_url``.
+
+    Parameters
+    ----------
+    base_url : str
+        An ``http``, ``https`` or ``file`` URL of a folder.
+    name : str, default="SHA256SUMS"
+        File name of the manifest in that folder.
+    timeout : float, default=60.0
+        Seconds to wait for the server at each read.
+
+    Returns
+    -------
+    checksums : dict of str to str or None
+        Lower-case hexadecimal SHA-256 digest by file name, or None when the folder has no
+        manifest.
+
+    Raises
+    ------
+    ValueError
+        When a line of the manifest is malformed.
+    """
+    url = file_url(base_url, name)
+    _check_url(url)
+    try:
+        with urlopen(url, timeout=timeout) as response:
+            text = response.read().decode("utf-8")
+    except HTTPError as exc:
+        if exc.code == 404:
+            return None
+        raise
+    except URLError as exc:
+        if isinstance(exc.reason, FileNotFoundError):
+            return None
+        raise
+    checksums = {}
+    for line_number, line in enumerate(text.splitlines(), start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        parts = line.split(maxsplit=1)
+        if len(parts) != 2:
+            raise ValueError(f"Line {line_number} of the manifest {url!r} is malformed: {line!r}.")
+        digest, file_name = parts
+        checksums[file_name.strip().lstrip("*")] = _check_sha256(digest, file_name)
+    return checksums
+
+
+def _member_parts(name, archive):
+    """Split an archive member name into path parts, refusing names that escape the folder."""
+    posix = PurePosixPath(name.replace("\\", "/"))
+    parts = [p for p in posix.parts if p not in ("", ".")]
+    if posix.is_absolute() or ".." in parts or (parts and re.match(r"^[A-Za-z]:$", parts[0])):
+        raise ValueError(
+            f"Refusing to unpack {archive}: its member {name!r} would be written outside the "
+            "target folder."
+        )
+    return tuple(parts)
+
+
+def list_members(archive):
+    """Return the path parts of every regular file in a zip or tar archive.
+
+    Parameters
+    ----------
+    archive : path-like
+        The zip or tar (optionally compressed) archive.
+
+    Returns
+    -------
+    members : list of tuple of str
+        The path parts of each regular file, in archive order.
+
+    Raises
+    ------
+    ValueError
+        When the file is neither a zip nor a tar archive, or a member name is absolute or
+        contains ``..``.
+    """
+    archive = Path(archive)
+    if zipfile.is_zipfile(archive):
+        with zipfile.ZipFile(archive) as zf:
+            infos = zf.infolist()
+            return [_member_parts(i.filename, archive.name) for i in infos if not i.is_dir()]
+    if tarfile.is_tarfile(archive):
+        with tarfile.open(archive) as tf:
+            members = tf.getmembers()
+            for m in members:
+                _member_parts(m.name, archive.name)
+            return [_member_parts(m.name, archive.name) for m in members if m.isfile()]
+    raise ValueError(f"{archive} is neither a zip nor a tar archive.")
+
+
+def extract(archive, destinations):
+    """Unpack selected regular files of a zip or tar archive.
+
+    Parameters
+    ----------
+    archive : path-like
+        The zip or tar (optionally compressed) archive.
+    destinations : callable
+        Called with the path parts of every regular file; returns the path where the file
+        goes, or None to skip it. Links and special files are never unpacked.
+
+    Raises
+    ------
+    ValueError
+        When the file is neither a zip nor a tar archive, or a member name would be written
+        outside the target folder.
+
+    Notes
+    -----
+    Files are written in place as they come: use :func:`extract_folders` so that a failure
+    never leaves a partly unpacked folder where a cache expects a complete one.
+    """
+    archive = Path(archive)
+    if zipfile.is_zipfile(archive):
+        with zipfile.ZipFile(archive) as zf:
+            for info in zf.infolist():
+                if info.is_dir():
+                    continue
+                # A zip written on Unix can mark a member as a symbolic link.
+                if (info.external_attr >> 16) & 0o170000 == 0o120000:
+                    continue
+                target = destinations(_member_parts(info.filename, archive.name))
+                if target is not None:
+                    _copy_member(zf.open(info), target)
+        return
+    if tarfile.is_tarfile(archive):
+        with tarfile.open(archive) as tf:
+            for member in tf:
+                parts = _member_parts(member.name, archive.name)
+                if not member.isfile():
+                    continue
+                target = destinations(parts)
+                if target is not None:
+                    _copy_member(tf.extractfile(member), target)
+        return
+    raise ValueError(f"{archive} is neither a zip nor a tar archive.")
+
+
+def _copy_member(source, target):
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with source, open(target, "wb") as out:
+        shutil.copyfileobj(source, out, _CHUNK_SIZE)
+
+
+@contextmanager
+def atomic_open(path, mode="w", *, suffix=""):
+    """Open a hidden temporary file next to ``path``, renamed to ``path`` on success.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file to write; its folder must exist.
+    mode : {"w", "wb"}, default="w"
+        Text or binary.
+    suffix : str, default=""
+        End of the temporary file's name.
+
+    Yields
+    ------
+    file : file object
+        The temporary file. When the ``with`` block ends normally, the file is closed and
+        renamed (atomically) to ``path``; when it raises anything, including a
+        ``KeyboardInterrupt``, the temporary file is deleted and ``path`` is left as it was.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    try:
+        with os.fdopen(fd, mode) as file:
+            yield file
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def extract_folders(archive, root, folder_of):
+    """Unpack members of an archive into folders of ``root``, each renamed into place whole.
+
+    Parameters
+    ----------
+    archive : path-like
+        The zip or tar archive, see :func:`extract`.
+    root : path-like
+        The existing folder that receives the unpacked folders.
+    folder_of : callable
+        Called with the path parts of every regular file of the archive; returns the folder
+        (relative to ``root``) the file belongs to and its path parts inside that folder, or
+        None to skip the file.
+
+    Notes
+    -----
+    The files go to a hidden temporary folder in ``root`` first, and each folder is renamed into
+    place only once the whole archive is unpacked: a folder of ``root`` is always complete. A
+    folder already in ``root`` (unpacked meanwhile by another process) is kept as it is.
+    """
+    root = Path(root)
+    tmp = Path(tempfile.mkdtemp(prefix=".unpacking-", dir=root))
+    folders = {}
+    try:
+
+        def destination(parts):
+            found = folder_of(parts)
+            if found is None:
+                return None
+            folder, inside = Path(found[0]), found[1]
+            folders.setdefault(folder)
+            return (tmp / folder).joinpath(*inside)
+
+        extract(archive, destination)
+        for folder in folders:
+            final = root / folder
+            final.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                (tmp / folder).rename(final)
+            except OSError:
+                if not final.is_dir():
+                    raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
