@@ -11,6 +11,7 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
+from ._docstrings import fill_shared_parameters
 from ._evaluation import check_recording_splits, evaluate_models
 from ._score_tables import best_per_recording, labels_of, rescore_table
 from ._selector_base import default_estimator, input_feature_names
@@ -182,6 +183,7 @@ def candidate_subsets(
     return pd.DataFrame(rows)
 
 
+@fill_shared_parameters
 def compare_subsets(
     X,
     y,
@@ -206,14 +208,21 @@ def compare_subsets(
     ----------
     X : pandas.DataFrame of shape (n_samples, n_features)
         Candidate features with their names as columns.
-    y, groups : array-like of shape (n_samples,)
+    y : array-like of shape (n_samples,)
+        Target (driver torque).
+    groups : array-like of shape (n_samples,)
+        Recording id of every row (required: the comparison validates whole recordings).
     subsets : dict
         Name -> tuple of feature names; at least one must be non-empty.
-    cv : splitter
-        Training/validation split(s), as in the selectors.
+    {cv}
     trade_off : str, default="50/50"
-    estimator, sampling_period, n_jobs, memory, verbose
-        As in the selectors.
+        Trade-off "accuracy/smoothness" in percent of the normalised performance score.
+    {estimator}
+    {sampling_period}
+        Required: the comparison scores the smoothness.
+    {n_jobs}
+    {memory}
+    {verbose}
 
     Returns
     -------

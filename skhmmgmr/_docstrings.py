@@ -38,11 +38,13 @@ memory : str or joblib.Memory, default=None
     "verbose": """\
 verbose : int, default=0
     Show a progress bar when positive.""",
+    "k_min, k_max": """\
+k_min, k_max : int, default=1, 20
+    Range of K, the number of hidden states.""",
     # selectors and scorers
     "sampling_period": """\
 sampling_period : float, default=None
-    Seconds between two rows, for the smoothness. The selectors require it; a scorer may
-    read the time from ``time_column`` instead.""",
+    Seconds between two rows, for the smoothness (the time derivative of the estimate).""",
     # scorers
     "time_column": """\
 time_column : str, default=None
@@ -55,32 +57,57 @@ predict_mode : {"auto", "groups", "per_recording"}, default="auto"
     recording). ``"per_recording"``: one ``estimator.predict`` call per recording, which
     works for any estimator or pipeline. ``"auto"``: ``"groups"`` if ``predict`` has a
     ``groups`` parameter, else ``"per_recording"``.""",
+    # metric functions
+    "y_true": """\
+y_true : array-like of shape (n_samples,) or (n_samples, n_outputs)
+    Observed target (driver torque).""",
+    "y_pred": """\
+y_pred : array-like of shape (n_samples,) or (n_samples, n_outputs)
+    Estimated target.""",
+    "groups": """\
+groups : array-like of shape (n_samples,), default=None
+    Recording id of every row; the rows of a recording must be contiguous. ``None`` means
+    all rows form one recording.""",
+    "time": """\
+time : array-like of shape (n_samples,), default=None
+    Time stamp of every row in seconds, strictly increasing within each recording.""",
+    "multioutput": """\
+multioutput : {"uniform_average", "raw_values"} or array-like of shape (n_outputs,), \
+        default="uniform_average"
+    How to combine several outputs: their plain mean, one value per output, or a weighted
+    mean.""",
 }
 
-# Names for runs of shared entries that always come together, in this order.
+# Names for runs of shared entries that always come together, in this order; an item is a key
+# of SHARED_PARAMETERS or a (key, sentence added to its description) pair.
 SHARED_GROUPS = {
     "search parameters": (
         "cv",
         "accuracy_weight, smoothness_weight",
-        "sampling_period",
+        ("sampling_period", "Required: every search scores the smoothness."),
         "n_jobs",
         "memory",
         "verbose",
     ),
+    "y_true, y_pred": ("y_true", "y_pred"),
 }
 
 _PLACEHOLDER = re.compile(r"^( *)\{([a-z_, ]+)\}$", re.MULTILINE)
 
 
 def fill_shared_parameters(obj):
-    """Class decorator: replace the ``{name}`` lines of ``obj.__doc__`` by the shared entries."""
+    """Decorator of a class or function: replace the ``{name}`` lines of its docstring by the
+    shared entries."""
 
     def entry(match):
         indent, name = match.groups()
-        names = SHARED_GROUPS.get(name, (name,))
-        if not all(key in SHARED_PARAMETERS for key in names):
+        items = [(i, "") if isinstance(i, str) else i for i in SHARED_GROUPS.get(name, (name,))]
+        if not all(key in SHARED_PARAMETERS for key, _ in items):
             return match.group(0)
-        return "\n".join(textwrap.indent(SHARED_PARAMETERS[key], indent) for key in names)
+        entries = [
+            SHARED_PARAMETERS[key] + (f"\n    {note}" if note else "") for key, note in items
+        ]
+        return "\n".join(textwrap.indent(entry, indent) for entry in entries)
 
     if obj.__doc__:
         obj.__doc__ = _PLACEHOLDER.sub(entry, obj.__doc__)

@@ -409,6 +409,7 @@ class SmoothnessScore(_RecordingScorer):
         return average(metrics.smoothness, "uniform_average")
 
 
+@fill_shared_parameters
 def make_performance_scorers(
     trade_offs=("100/0", "50/50", "0/100"),
     *,
@@ -425,11 +426,14 @@ def make_performance_scorers(
     ----------
     trade_offs : str, pair or list of those, default=("100/0", "50/50", "0/100")
         Trade-offs as in :func:`normalize_performance`.
-    sampling_period, time_column, accuracy_scale, smoothness_scale, predict_mode
-        Passed to every scorer; see :class:`PerformanceScore`.
+    {sampling_period}
+    {time_column}
+    accuracy_scale, smoothness_scale : float or mapping, default=None
+        Reference scales passed to every scorer; see :class:`PerformanceScore`.
     metrics : bool, default=True
         Also add ``"accuracy"`` (:class:`AccuracyScore`) and ``"neg_smoothness"``
         (:class:`SmoothnessScore`).
+    {predict_mode}
 
     Returns
     -------

@@ -14,10 +14,12 @@ from sklearn.feature_selection import SelectorMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._compat import Interval, StrOptions, _fit_context
+from ._docstrings import fill_shared_parameters
 from ._sequences import as_recordings
 from ._validation import check_dense, check_finite, check_target_finite, column_names_of
 
 
+@fill_shared_parameters
 def spearman_relevance(X, y, *, groups=None):
     """Absolute Spearman correlation of every feature with the torque, averaged over recordings.
 
@@ -37,8 +39,7 @@ def spearman_relevance(X, y, *, groups=None):
         Candidate features, rows of a recording contiguous.
     y : array-like of shape (n_samples,)
         Target (driver torque).
-    groups : array-like of shape (n_samples,), default=None
-        Recording id of every row; ``None`` means one recording.
+    {groups}
 
     Returns
     -------

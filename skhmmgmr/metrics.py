@@ -28,6 +28,7 @@ import numbers
 import numpy as np
 import pandas as pd
 
+from ._docstrings import fill_shared_parameters
 from ._metrics_scorers import (
     AccuracyScore,
     PerformanceScore,
@@ -65,22 +66,15 @@ __all__ = [
 # --------------------------------------------------------------------------------------------
 
 
+@fill_shared_parameters
 def accuracy_score(y_true, y_pred, *, groups=None, multioutput="uniform_average"):
     """Accuracy ``(1 - RMSE / SD(T)) * 100`` per recording, averaged over recordings.
 
     Parameters
     ----------
-    y_true : array-like of shape (n_samples,) or (n_samples, n_outputs)
-        Observed target (driver torque).
-    y_pred : array-like of shape (n_samples,) or (n_samples, n_outputs)
-        Estimated target.
-    groups : array-like of shape (n_samples,), default=None
-        Recording id of every row; the rows of a recording must be contiguous. ``None`` means
-        all rows form one recording.
-    multioutput : {"uniform_average", "raw_values"} or array-like of shape (n_outputs,), \
-            default="uniform_average"
-        How to combine several outputs: their plain mean, one value per output, or a weighted
-        mean.
+    {y_true, y_pred}
+    {groups}
+    {multioutput}
 
     Returns
     -------
@@ -104,6 +98,7 @@ def accuracy_score(y_true, y_pred, *, groups=None, multioutput="uniform_average"
     return average(metrics.accuracy, multioutput)
 
 
+@fill_shared_parameters
 def smoothness_score(
     y_pred, *, sampling_period=None, time=None, groups=None, multioutput="uniform_average"
 ):
@@ -111,17 +106,14 @@ def smoothness_score(
 
     Parameters
     ----------
-    y_pred : array-like of shape (n_samples,) or (n_samples, n_outputs)
-        Estimated target.
-    sampling_period : float, default=None
-        Seconds between two rows. Give this or ``time``.
-    time : array-like of shape (n_samples,), default=None
-        Time stamp of every row in seconds, strictly increasing within each recording.
-    groups : array-like of shape (n_samples,), default=None
-        Recording id of every row; ``None`` means one recording. The derivative is taken
-        within each recording only, so every recording needs at least two rows.
-    multioutput : {"uniform_average", "raw_values"} or array-like, default="uniform_average"
-        How to combine several outputs.
+    {y_pred}
+    {sampling_period}
+        Give this or ``time``.
+    {time}
+    {groups}
+        The derivative is taken within each recording only, so every recording needs at least
+        two rows.
+    {multioutput}
 
     Returns
     -------
@@ -146,6 +138,7 @@ def smoothness_score(
     return average(metrics.smoothness, multioutput)
 
 
+@fill_shared_parameters
 def performance_score(
     y_true,
     y_pred,
@@ -168,23 +161,16 @@ def performance_score(
 
     Parameters
     ----------
-    y_true : array-like of shape (n_samples,) or (n_samples, n_outputs)
-        Observed target.
-    y_pred : array-like of shape (n_samples,) or (n_samples, n_outputs)
-        Estimated target.
-    accuracy_weight, smoothness_weight : float, default=0.5
-        The trade-off weights ``w1`` and ``w2`` (the thesis' "50/50" is 0.5 and 0.5).
-    sampling_period : float, default=None
-        Seconds between two rows. Give this or ``time``, unless ``smoothness_weight`` is 0.
-    time : array-like of shape (n_samples,), default=None
-        Time stamp of every row in seconds.
-    groups : array-like of shape (n_samples,), default=None
-        Recording id of every row; ``None`` means one recording.
+    {y_true, y_pred}
+    {accuracy_weight, smoothness_weight}
+    {sampling_period}
+        Give this or ``time``, unless ``smoothness_weight`` is 0.
+    {time}
+    {groups}
     accuracy_scale, smoothness_scale : float or mapping, default=None
         Reference scale dividing each term: one positive number, or a mapping (dict or
         :class:`pandas.Series`) from recording id to a number. ``None`` means 1.
-    multioutput : {"uniform_average", "raw_values"} or array-like, default="uniform_average"
-        How to combine several outputs.
+    {multioutput}
 
     Returns
     -------
@@ -217,21 +203,17 @@ def performance_score(
     return average(per_recording, multioutput)
 
 
+@fill_shared_parameters
 def evaluate_recordings(y_true, y_pred, *, groups=None, sampling_period=None, time=None):
     """Table of the metrics of every recording.
 
     Parameters
     ----------
-    y_true : array-like of shape (n_samples,) or (n_samples, n_outputs)
-        Observed target.
-    y_pred : array-like of shape (n_samples,) or (n_samples, n_outputs)
-        Estimated target.
-    groups : array-like of shape (n_samples,), default=None
-        Recording id of every row; ``None`` means one recording (id 0).
-    sampling_period : float, default=None
-        Seconds between two rows. Give this or ``time``.
-    time : array-like of shape (n_samples,), default=None
-        Time stamp of every row in seconds.
+    {y_true, y_pred}
+    {groups}
+    {sampling_period}
+        Give this or ``time``.
+    {time}
 
     Returns
     -------

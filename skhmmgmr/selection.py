@@ -35,6 +35,7 @@ from ._candidates import (
     compare_subsets,
     feature_relevance,
 )
+from ._docstrings import fill_shared_parameters
 from ._evaluation import shared_evaluations
 from ._framework_data import sampling_period_of, split_recordings_table
 from ._score_tables import labels_of, one_way_anova
@@ -180,6 +181,7 @@ def _fit_on(estimator, X, y, groups, rows, features, n_states):
         return model.fit(X.loc[rows, list(features)].to_numpy(), y[rows], groups=groups[rows])
 
 
+@fill_shared_parameters
 def select_parameters(
     data,
     *,
@@ -254,15 +256,12 @@ def select_parameters(
         strategy). ``7`` is the "first seven strategies" of Appendix E.1.3; ``None``: all.
     tol : float, default=0.01
         The 1% rule of the forward selection and the state selection.
-    sampling_period : float, default=None
-        Seconds between rows; default: the median time step of the ``time`` column.
+    {sampling_period}
+        ``None``: the median time step of the ``time`` column.
     estimator : HMMGMRRegressor, default=None
         Model template; default ``HMMGMRRegressor(random_state=random_state)``.
-    n_jobs : int, default=None
-        Parallel fits (joblib; a surrounding ``joblib.parallel_backend("dask")`` runs them on a
-        dask cluster).
-    memory : str or joblib.Memory, default=None
-        Cache of every fit and evaluation: rerunning resumes where it stopped.
+    {n_jobs}
+    {memory}
     progress : bool, default=True
         Show progress bars.
     random_state : int, default=0

@@ -111,8 +111,7 @@ class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
     Parameters
     ----------
     {estimator}
-    k_min, k_max : int, default=1, 20
-        Range of K.
+    {k_min, k_max}
     tol : float, default=0.01
         Relative gain below which K stops growing.
     param_name : str, default="n_states"
@@ -272,6 +271,7 @@ class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
         return self.best_estimator_.predict(X, groups=groups)
 
 
+@fill_shared_parameters
 def select_n_states(
     X,
     y,
@@ -294,12 +294,23 @@ def select_n_states(
 
     Parameters
     ----------
-    X, y, groups
-        Fixed feature subset, target and recording ids of the training and validation rows.
+    X : array-like of shape (n_samples, n_features)
+        The fixed feature subset of the training and validation recordings.
+    y : array-like of shape (n_samples,)
+        Target (driver torque).
+    {groups}
     trade_offs : list of str, default=None
         Trade-offs to choose K for; ``None`` means "100/0" to "0/100" in steps of 10%.
-    estimator, k_min, k_max, tol, cv, sampling_period, n_jobs, memory, verbose
-        As in :class:`StateSelector`.
+    {estimator}
+    {k_min, k_max}
+    tol : float, default=0.01
+        Relative gain below which K stops growing.
+    {cv}
+    {sampling_period}
+        Required: every search scores the smoothness.
+    {n_jobs}
+    {memory}
+    {verbose}
 
     Returns
     -------

@@ -11,44 +11,51 @@ from skhmmgmr._docstrings import SHARED_GROUPS, SHARED_PARAMETERS, fill_shared_p
 # A parameter that only shares its name with a shared one, and what it means there instead.
 SAME_NAME_OTHER_MEANING = {
     ("HMMGMRRegressor", "verbose"): "prints the log-likelihood of every EM iteration",
+    ("compare_subsets", "groups"): "required: the comparison validates whole recordings",
+    ("select_parameters", "estimator"): "a template whose features and n_states it selects",
 }
 
 
-def public_classes():
+def public_objects():
+    """Public classes (their parameters are those of ``__init__``) and public functions."""
     found = {}
     for module in (skhmmgmr, metrics, feature_selection, selection, state_selection):
         for name in getattr(module, "__all__", []):
             obj = getattr(module, name)
-            if inspect.isclass(obj) and obj.__doc__ and "__init__" in vars(obj):
+            if not obj.__doc__:
+                continue
+            if (inspect.isclass(obj) and "__init__" in vars(obj)) or inspect.isfunction(obj):
                 found[obj.__qualname__] = obj
-    return sorted(found.values(), key=lambda cls: cls.__qualname__)
+    return sorted(found.values(), key=lambda obj: obj.__qualname__)
+
+
+def parameters(obj):
+    return set(inspect.signature(obj.__init__ if inspect.isclass(obj) else obj).parameters)
 
 
 def takers(key):
     names = [n.strip() for n in key.split(",")]
-    return [
-        cls
-        for cls in public_classes()
-        if set(names) <= set(inspect.signature(cls.__init__).parameters)
-    ]
+    return [obj for obj in public_objects() if set(names) <= parameters(obj)]
 
 
 @pytest.mark.parametrize("key", sorted(SHARED_PARAMETERS))
 def test_every_class_taking_a_shared_parameter_describes_it_with_the_shared_entry(key):
-    classes = takers(key)
-    assert classes, f"no public class takes the shared parameter(s) {key}"
-    for cls in classes:
-        if (cls.__qualname__, key) in SAME_NAME_OTHER_MEANING:
-            continue
-        described = SHARED_PARAMETERS[key] in inspect.cleandoc(cls.__doc__)
-        assert described, (
-            f"{cls.__qualname__} describes {key} otherwise than the shared entry "
-            f"(write the line '{{{key}}}' in its Parameters section)"
-        )
+    objects = takers(key)
+    assert objects, f"no public class or function takes the shared parameter(s) {key}"
+    otherwise = [
+        obj.__qualname__
+        for obj in objects
+        if (obj.__qualname__, key) not in SAME_NAME_OTHER_MEANING
+        and SHARED_PARAMETERS[key] not in inspect.cleandoc(obj.__doc__)
+    ]
+    assert not otherwise, (
+        f"{', '.join(otherwise)} describe(s) {key} otherwise than the shared entry "
+        f"(write the line '{{{key}}}' in the Parameters section)"
+    )
 
 
 def test_no_placeholder_is_left_in_a_public_docstring():
-    for cls in public_classes():
+    for cls in public_objects():
         for key in [*SHARED_PARAMETERS, *SHARED_GROUPS]:
             assert "{" + key + "}" not in cls.__doc__, (cls, key)
 
@@ -83,6 +90,7 @@ def test_a_group_placeholder_expands_to_its_entries_in_order():
         """
 
     doc = inspect.cleandoc(Example.__doc__)
-    positions = [doc.index(SHARED_PARAMETERS[key]) for key in SHARED_GROUPS["search parameters"]]
+    keys = [k if isinstance(k, str) else k[0] for k in SHARED_GROUPS["search parameters"]]
+    positions = [doc.index(SHARED_PARAMETERS[key]) for key in keys]
     assert positions == sorted(positions)
     assert "{search parameters}" not in doc
