@@ -12,18 +12,37 @@ of them predate the oldest supported release (``scikit-learn>=1.8`` in ``pyproje
 sit at the same path from 1.8 to 1.9, so no version switch is needed yet.
 """
 
+import numpy as np
 from sklearn.base import (
     _fit_context,  # fit decorator: validates _parameter_constraints once; since 1.3
 )
 from sklearn.utils._param_validation import (
     HasMethods,  # constraint: an object having the given methods; since 1.2
-    Interval,  # constraint: a real or integral number in a range; since 1.2
     StrOptions,  # constraint: one of a set of strings; since 1.2
+)
+from sklearn.utils._param_validation import (
+    Interval as _SklearnInterval,  # constraint: a number in a range (bools too); since 1.2
 )
 from sklearn.utils.metadata_routing import (
     _MetadataRequester,  # base class giving set_{method}_request and defaults; since 1.3
     _routing_enabled,  # whether enable_metadata_routing is on in the config; since 1.3
 )
+
+
+class Interval(_SklearnInterval):
+    """scikit-learn's ``Interval`` constraint, refusing bools.
+
+    ``True`` is an ``Integral`` and a ``Real`` in Python, so scikit-learn's constraint takes
+    ``n_states=True`` for 1 and ``sampling_period=True`` for 1 s; a bool in a numeric
+    parameter is a mistake, and the error names the parameter.
+    """
+
+    def is_satisfied_by(self, val):
+        return not isinstance(val, bool | np.bool_) and super().is_satisfied_by(val)
+
+    def __str__(self):
+        return f"{super().__str__()} (not a bool)"
+
 
 __all__ = [
     "HasMethods",

@@ -30,11 +30,17 @@ accuracy_weight, smoothness_weight : float, default=0.5
     Trade-off weights ``w1`` (accuracy) and ``w2`` (smoothness) of the performance score.""",
     "n_jobs": """\
 n_jobs : int, default=None
-    Parallel fits through joblib (any backend, e.g. ``joblib.parallel_backend("dask")``).""",
+    Parallel fits through joblib (any backend, e.g. ``joblib.parallel_backend("dask")``).
+    joblib's default process backend (loky) keeps its workers for the next search until they
+    have idled ``idle_worker_timeout`` seconds (300; set it with
+    ``joblib.parallel_config(backend="loky", idle_worker_timeout=...)``). Ctrl-C ends them at
+    once; after a run killed outright (SIGTERM, SIGKILL) they exit after that timeout (and
+    up to 30 s more), and the temporary copy of the data they read is deleted then.""",
     "memory": """\
 memory : str or joblib.Memory, default=None
     Cache of every (model, split) evaluation: a repeated or interrupted search resumes from it
-    without refitting.""",
+    without refitting. Results are keyed by the versions of skhmmgmr (and its source) and of
+    NumPy, SciPy, scikit-learn and numba too: another version recomputes them.""",
     "verbose": """\
 verbose : int, default=0
     Show a progress bar when positive.""",

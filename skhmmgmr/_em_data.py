@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._gaussian import MomentSums, augmented_columns, chunk_size_for
+from ._validation import binary_unit, constant_to_round_off
 
 # Consecutive short recordings are grouped into blocks of about this many rows.
 BLOCK_ROWS = 8192
@@ -43,9 +44,14 @@ class Columns:
     def standardized(cls, *blocks):
         """Columns of ``hstack(blocks)``, each column standardised, built without the stack.
 
-        Returns ``(columns, center, scale)``: the column means and standard deviations (a
-        constant column keeps scale 1). Only the columns are allocated at the size of the
-        data; the standardisation runs in place, one column at a time.
+        Returns ``(columns, center, scale)``: the column means and standard deviations. A
+        column whose standard deviation is round-off for its values
+        (:func:`~skhmmgmr._validation.constant_to_round_off`) is constant: it keeps scale 1.
+        Only the columns are allocated at the size of the data; the standardisation runs in
+        place, one column at a time. Each column is first divided by the power of two just
+        below its largest absolute value (exact in floating point), so that no sum or square
+        overflows or underflows whatever the column's unit, and the results are those of the
+        unscaled arithmetic (bit for bit when those neither overflow nor underflow).
         """
         n_samples = blocks[0].shape[0]
         n_features = sum(block.shape[1] for block in blocks)
@@ -55,14 +61,21 @@ class Columns:
             values[row : row + block.shape[1]] = block.T
             row += block.shape[1]
         values[n_features] = 1.0
-        center, scale = np.empty(n_features), np.empty(n_features)
+        center, scale = np.empty(n_features), np.ones(n_features)
         for i in range(n_features):
             column = values[i]
-            center[i] = column.mean()
-            column -= center[i]
+            magnitude = max(column.max(), -column.min()) if n_samples else 0.0
+            power = float(binary_unit(magnitude))
+            column /= power
+            mean = column.mean()
+            column -= mean
             spread = np.sqrt(np.dot(column, column) / n_samples)
-            scale[i] = spread if spread > 1e-12 * max(abs(center[i]), 1.0) else 1.0
-            column /= scale[i]
+            center[i] = mean * power
+            if constant_to_round_off(spread, magnitude / power):
+                column *= power
+            else:
+                scale[i] = spread * power
+                column /= spread
         return cls(values, np.zeros(n_features)), center, scale
 
     @property

@@ -242,6 +242,11 @@ class ModelIOMixin:
         Raises
         ------
         ValueError
-            If the file is not valid JSON or not a valid model file (see :meth:`from_dict`).
+            If the file is not valid JSON or not a valid model file (see :meth:`from_dict`);
+            the message names the file and the key.
         """
-        return cls.from_dict(load_json(path))
+        data = load_json(path)
+        try:
+            return cls.from_dict(data)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from exc

@@ -9,11 +9,16 @@ validation recording).
 """
 
 import contextvars
+import functools
+import hashlib
 import numbers
 import os
+import shutil
 import tempfile
 import warnings
 from contextlib import contextmanager
+from importlib import metadata
+from pathlib import Path
 
 import joblib
 import numpy as np
@@ -25,6 +30,8 @@ from sklearn.utils.validation import check_memory
 from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
+from ._validation import check_sampling_period
+from ._version import __version__
 from .metrics import evaluate_recordings
 
 METRICS = ["rmse", "accuracy", "smoothness"]
@@ -102,10 +109,39 @@ def check_recording_splits(cv, X, y, groups):
     return splits
 
 
+# Libraries whose numerics an evaluation calls: their versions are part of the cache key.
+_NUMERIC_LIBRARIES = ("numpy", "scipy", "scikit-learn", "numba")
+
+
+@functools.cache
+def _installed_code():
+    """SHA-256 of the package's Python source (an edited development install keeps its
+    version number) and the versions of the numerical libraries, read once per process."""
+    root = Path(__file__).parent
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
+    versions = {name: metadata.version(name) for name in _NUMERIC_LIBRARIES}
+    return {"source": digest.hexdigest(), **versions}
+
+
+def code_version():
+    """What a cached evaluation depends on besides its arguments.
+
+    :class:`joblib.Memory` keys a result by the arguments and the source of the cached
+    function only, not by the code that function calls: the package's version and source and
+    the versions of the numerical libraries go in as an argument, so that another version
+    recomputes instead of serving stale results.
+    """
+    return {"skhmmgmr": __version__, **_installed_code()}
+
+
 def _fit_and_evaluate(
-    folds, data_token, fold, estimator, columns, params, sampling_period, with_bic
+    folds, data_token, fold, estimator, columns, params, sampling_period, with_bic, code_version
 ):
-    # ``folds`` is left out of the cache key; ``data_token`` stands for it.
+    # ``folds`` is left out of the cache key; ``data_token`` stands for it. ``code_version``
+    # is only there for the key (see code_version()).
     X_train, y_train, groups_train, X_val, y_val, groups_val = folds[fold]
     columns = list(columns)
     model = clone(estimator).set_params(**params)
@@ -136,15 +172,40 @@ def _shared_with_workers(folds, n_jobs):
     """The fold arrays as read-only memory maps when models are fitted in other processes.
 
     joblib would otherwise hash and copy the data for every model it sends to a worker; a
-    memory-mapped array is sent as its file name.
+    memory-mapped array is sent as its file name. The folder is deleted when the block ends,
+    also on an exception or ``KeyboardInterrupt`` (joblib then kills its workers). For a run
+    that is killed outright (SIGTERM, SIGKILL) it is also registered with the resource
+    tracker of joblib's process backend (loky), a process that outlives the run as it does
+    for joblib's own memory-mapping folder: the tracker deletes it when the killed process and
+    its workers are gone (idle workers exit after joblib's ``idle_worker_timeout``, 300 s).
     """
     if n_jobs in (None, 1):
         yield folds
         return
-    with tempfile.TemporaryDirectory(prefix="skhmmgmr-", ignore_cleanup_errors=True) as folder:
+    folder = tempfile.mkdtemp(prefix="skhmmgmr-")
+    untrack = None
+    try:
+        untrack = _track_for_cleanup(folder)
         path = os.path.join(folder, "folds.joblib")
         joblib.dump(folds, path)
         yield joblib.load(path, mmap_mode="r")
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+        # A folder that could not be deleted now (a memory map still open on Windows) is
+        # left to the tracker.
+        if untrack is not None and not os.path.exists(folder):
+            untrack()
+
+
+def _track_for_cleanup(folder):
+    """Register ``folder`` with loky's resource tracker; return the function that
+    unregisters it."""
+    try:
+        from joblib.externals.loky.backend import resource_tracker
+    except ImportError:  # a joblib without its process backend: no worker outlives the run
+        return lambda: None
+    resource_tracker.register(folder, "folder")
+    return lambda: resource_tracker.unregister(folder, "folder")
 
 
 def evaluate_models(
@@ -176,11 +237,16 @@ def evaluate_models(
         ``rmse``, ``accuracy``, ``smoothness``, ``converged`` (and ``bic`` of the training
         recordings when ``with_bic``).
     """
+    if check_sampling_period(sampling_period) is None:
+        raise ValueError(
+            "give sampling_period (seconds between rows): every model is scored on its smoothness"
+        )
     memory = check_memory(memory)
     token = None
     if getattr(memory, "location", None) is not None:
         token = joblib.hash((X, y, groups, [(t, v) for t, v in splits]))
     task = memory.cache(_fit_and_evaluate, ignore=["folds"])
+    version = code_version() if token is not None else None
     estimator = clone(estimator)
     # Recordings travel as integer codes: string ids would be pickled for every model and
     # re-encoded by every fit.
@@ -197,6 +263,7 @@ def evaluate_models(
                 params=dict(params),
                 sampling_period=sampling_period,
                 with_bic=with_bic,
+                code_version=version,
             )
             for columns, params in models
             for fold in range(len(splits))

@@ -1,7 +1,6 @@
 """Scorers of :mod:`skhmmgmr.metrics`: per-recording prediction and metadata routing."""
 
 import inspect
-import numbers
 import warnings
 
 import numpy as np
@@ -17,6 +16,7 @@ from ._metrics_table import (
     recording_metrics,
 )
 from ._sequences import as_recordings
+from ._validation import check_sampling_period
 
 
 class UngroupedScoringWarning(UserWarning):
@@ -115,13 +115,7 @@ class _RecordingScorer(_MetadataRequester):
     def _check_params(self):
         if self.sampling_period is not None and self.time_column is not None:
             raise ValueError("give either sampling_period or time_column, not both")
-        if self.sampling_period is not None and (
-            not isinstance(self.sampling_period, numbers.Real) or not self.sampling_period > 0
-        ):
-            raise ValueError(
-                f"sampling_period must be a positive number of seconds, "
-                f"got {self.sampling_period!r}"
-            )
+        check_sampling_period(self.sampling_period)
         if self.predict_mode not in ("auto", "groups", "per_recording"):
             raise ValueError(
                 "predict_mode must be 'auto', 'groups' or 'per_recording', "

@@ -8,6 +8,7 @@ import pandas as pd
 from sklearn.utils.validation import check_array
 
 from ._sequences import as_recordings
+from ._validation import binary_unit, check_sampling_period, constant_to_round_off
 
 
 def check_named_lengths(**arrays):
@@ -52,15 +53,7 @@ def check_sampling(sampling_period, time, n_samples):
     if sampling_period is not None and time is not None:
         raise ValueError("give either sampling_period or time, not both")
     if sampling_period is not None:
-        if (
-            not isinstance(sampling_period, numbers.Real)
-            or not np.isfinite(sampling_period)
-            or sampling_period <= 0
-        ):
-            raise ValueError(
-                f"sampling_period must be a positive number of seconds, got {sampling_period!r}"
-            )
-        return float(sampling_period), None
+        return check_sampling_period(sampling_period), None
     time = np.asarray(time, dtype=float)
     if time.ndim != 1:
         raise ValueError(f"time must be 1-D (one time stamp per row), got shape {time.shape}")
@@ -124,23 +117,32 @@ def recording_metrics(
     rmse = np.empty((n_rec, n_outputs)) if accuracy else None
     acc = np.empty((n_rec, n_outputs)) if accuracy else None
     smooth = np.empty((n_rec, n_outputs)) if smoothness else None
+    # Squares and standard deviations are taken in units of a power of two near the largest
+    # value of each output (exact): no unit overflows or underflows them.
     for i, (rec_id, rows) in enumerate(recordings.slices()):
         pred = y_pred[rows]
         _check_finite(pred, "y_pred", rec_id)
         if accuracy:
             true = y_true[rows]
             _check_finite(true, "y_true", rec_id)
-            spread = true.std(axis=0)
-            if np.any(spread == 0):
+            true_magnitude = np.abs(true).max(axis=0)
+            true_unit = binary_unit(true_magnitude)
+            spread = (true / true_unit).std(axis=0)
+            constant = constant_to_round_off(spread, true_magnitude / true_unit)
+            spread *= true_unit
+            if np.any(constant):
                 raise ValueError(
-                    f"y_true is constant in recording {rec_id!r} (standard deviation 0), "
+                    f"y_true is constant in recording {rec_id!r} (standard deviation "
+                    f"{spread[np.flatnonzero(constant)[0]]:.3g}, round-off for its values), "
                     "so its accuracy (1 - RMSE / SD) * 100 is undefined"
                 )
-            rmse[i] = np.sqrt(np.mean((pred - true) ** 2, axis=0))
+            unit = binary_unit(np.maximum(true_magnitude, np.abs(pred).max(axis=0)))
+            rmse[i] = np.sqrt(np.mean((pred / unit - true / unit) ** 2, axis=0)) * unit
             acc[i] = (1.0 - rmse[i] / spread) * 100.0
         if smoothness:
             steps = sampling_period if time is None else np.diff(time[rows])[:, None]
-            smooth[i] = (np.diff(pred, axis=0) / steps).std(axis=0)
+            unit = binary_unit(np.abs(pred).max(axis=0))
+            smooth[i] = (np.diff(pred / unit, axis=0) / steps).std(axis=0) * unit
     return RecordingMetrics(
         ids=recordings.ids,
         n_samples=recordings.lengths,
@@ -218,6 +220,11 @@ def parse_trade_off(trade_off):
         label = f"{round(100 * w1, 6):g}/{round(100 * w2, 6):g}"
     if min(w1, w2) < 0 or not np.isfinite([w1, w2]).all():
         raise ValueError(f"trade-off weights must be finite and non-negative, got {trade_off!r}")
+    if w1 + w2 == 0:
+        raise ValueError(
+            f"trade-off {trade_off!r} gives both the accuracy and the smoothness weight 0, so "
+            "every model would score 0; give one of them a weight"
+        )
     return label, w1, w2
 
 
@@ -244,7 +251,12 @@ def check_weights(accuracy_weight, smoothness_weight):
         ("accuracy_weight", accuracy_weight),
         ("smoothness_weight", smoothness_weight),
     ):
-        if not isinstance(weight, numbers.Real) or not weight >= 0 or not np.isfinite(weight):
+        if (
+            isinstance(weight, bool | np.bool_)
+            or not isinstance(weight, numbers.Real)
+            or not weight >= 0
+            or not np.isfinite(weight)
+        ):
             raise ValueError(f"{name} must be a finite non-negative number, got {weight!r}")
     if accuracy_weight == 0 and smoothness_weight == 0:
         raise ValueError("accuracy_weight and smoothness_weight are both 0; give one a weight")

@@ -7,9 +7,14 @@ which is what ``skhmmgmr report DIR`` runs.
 """
 
 import base64
+import hashlib
 import html
 import json
+import os
 import platform
+import secrets
+import shutil
+import tempfile
 import warnings
 from pathlib import Path
 
@@ -21,6 +26,9 @@ from ._version import __version__
 MANIFEST = "manifest.json"
 PAGE = "index.html"
 MAX_ROWS = 25
+# keys of every entry of the manifest's lists
+TABLE_FIELDS = ("name", "file", "caption", "shown")
+FIGURE_FIELDS = ("name", "file", "caption")
 
 # name -> (caption, shown on the page); every table is saved, long ones are shown truncated
 TABLES = {
@@ -160,42 +168,187 @@ def _cell(value):
     return value
 
 
-def write_report(output, *, tables, figures, meta):
+def write_report(output, *, tables, figures, meta, overwrite=False):
     """Write tables (CSV), figures (PNG), the manifest and the HTML page into ``output``.
+
+    The report is written into a temporary folder beside ``output`` and swapped in once
+    complete: an interrupted or failed write leaves the previous folder as it was, never a
+    folder mixing two runs. The manifest records every file's SHA-256 (and a table's number of
+    rows), which :func:`render_html` checks.
 
     Parameters
     ----------
     output : str or path
-        Folder, created if needed.
+        Folder, created (with its parents) if needed, replaced if it is a report.
     tables : dict of str to DataFrame
     figures : dict of str to matplotlib.figure.Figure
         Saved at 110 dpi and closed.
     meta : dict
         JSON-serialisable; keys ``title``, ``text`` (list of paragraphs) and ``details``
         (label -> value, shown as a table) are rendered, the rest is kept in the manifest.
+    overwrite : bool, default=False
+        Also replace a file, or a folder holding files that are not of a report.
 
     Returns
     -------
     page : pathlib.Path
         The HTML page.
-    """
-    output = Path(output)
-    output.mkdir(parents=True, exist_ok=True)
-    manifest = {**meta, "tables": [], "figures": []}
-    for name, table in tables.items():
-        file = f"{name}.csv"
-        table.apply(lambda column: column.map(_cell)).to_csv(output / file, index=False)
-        caption, shown = table_caption(name)
-        manifest["tables"].append({"name": name, "file": file, "caption": caption, "shown": shown})
-    for name, fig in figures.items():
-        file = f"{name}.png"
-        fig.savefig(output / file, dpi=110)
-        import matplotlib.pyplot as plt
 
-        plt.close(fig)
-        manifest["figures"].append({"name": name, "file": file, "caption": FIGURES.get(name, "")})
-    (output / MANIFEST).write_text(json.dumps(manifest, indent=2, default=str))
-    return render_html(output)
+    Raises
+    ------
+    ValueError
+        When ``output`` holds something else than a report and ``overwrite`` is False.
+    """
+    output = Path(os.path.abspath(output))  # "." has a name and a parent
+    check_replaceable(output, overwrite=overwrite)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    # not mkdtemp, whose folders only their owner may read
+    staging = output.parent / f".{output.name}.{os.getpid()}-{secrets.token_hex(4)}.partial"
+    staging.mkdir()
+    try:
+        manifest = {**meta, "tables": [], "figures": []}
+        for name, table in tables.items():
+            file = f"{name}.csv"
+            table.apply(lambda column: column.map(_cell)).to_csv(staging / file, index=False)
+            caption, shown = table_caption(name)
+            entry = {"name": name, "file": file, "caption": caption, "shown": shown}
+            entry.update(rows=len(table), sha256=_sha256(staging / file))
+            manifest["tables"].append(entry)
+        for name, fig in figures.items():
+            file = f"{name}.png"
+            fig.savefig(staging / file, dpi=110)
+            caption = FIGURES.get(name, "")
+            entry = {"name": name, "file": file, "caption": caption}
+            manifest["figures"].append({**entry, "sha256": _sha256(staging / file)})
+        (staging / MANIFEST).write_text(json.dumps(manifest, indent=2, default=str))
+        render_html(staging)
+        _swap(staging, output)
+    finally:
+        if figures:
+            import matplotlib.pyplot as plt
+
+            for fig in figures.values():
+                plt.close(fig)
+        shutil.rmtree(staging, ignore_errors=True)
+    return output / PAGE
+
+
+def _swap(new, target):
+    """Put the folder ``new`` at ``target``; what was there is deleted only once it is."""
+    if not os.path.lexists(target):
+        os.replace(new, target)
+        return
+    trash = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old", dir=target.parent))
+    os.replace(target, trash / target.name)
+    try:
+        os.replace(new, target)
+    except BaseException:
+        os.replace(trash / target.name, target)
+        trash.rmdir()
+        raise
+    shutil.rmtree(trash, ignore_errors=True)
+
+
+def foreign_files(folder):
+    """Sorted names of what ``folder`` holds besides a report: all of it if it is no report."""
+    folder = Path(folder)
+    present = {path.name for path in folder.iterdir()}
+    try:
+        manifest = read_manifest(folder)
+    except (OSError, ValueError):
+        return sorted(present)
+    listed = {MANIFEST, PAGE, *(e["file"] for e in manifest["tables"] + manifest["figures"])}
+    return sorted(present - listed)
+
+
+def check_replaceable(output, *, overwrite):
+    """Refuse to replace ``output`` (ValueError) unless it is absent, an empty folder or a
+    report folder, or ``overwrite`` is True."""
+    output = Path(output)
+    if overwrite or not os.path.lexists(output):
+        return
+    if not output.is_dir():
+        raise ValueError(
+            f"{output} exists and is not a folder; choose another report folder or pass "
+            "--overwrite to replace the file"
+        )
+    foreign = foreign_files(output)
+    if foreign:
+        shown = ", ".join(foreign[:5]) + (
+            f" and {len(foreign) - 5} more" if len(foreign) > 5 else ""
+        )
+        raise ValueError(
+            f"{output} is not a skhmmgmr report folder (it holds {shown}); choose another "
+            "report folder or pass --overwrite to replace it with all its content"
+        )
+
+
+def _sha256(path):
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def read_manifest(folder):
+    """The manifest of a report folder, checked: ValueError naming the file and the key."""
+    path = Path(folder) / MANIFEST
+    if not path.is_file():
+        raise FileNotFoundError(f"{folder} holds no {MANIFEST}: not a skhmmgmr report folder")
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path} is not valid JSON ({exc}); rerun the command") from None
+    if not isinstance(manifest, dict):
+        raise ValueError(f"{path} must hold a JSON object, not {type(manifest).__name__}")
+    for key, fields in (("tables", TABLE_FIELDS), ("figures", FIGURE_FIELDS)):
+        entries = manifest.get(key)
+        if not isinstance(entries, list):
+            found = "lacks the key" if key not in manifest else "has no list under"
+            raise ValueError(f"{path} {found} {key!r}: not a complete report manifest")
+        for k, entry in enumerate(entries):
+            lacking = [f for f in fields if not isinstance(entry, dict) or f not in entry]
+            if lacking:
+                raise ValueError(f"{path}: entry {k} of {key!r} lacks {lacking}")
+            _check_inside(folder, entry["file"], f"{path}: {key} entry {entry['name']!r}")
+    return manifest
+
+
+def _check_inside(folder, name, where):
+    plain = isinstance(name, str) and Path(name).name == name and name not in ("", ".", "..")
+    if not plain or (Path(folder) / name).resolve().parent != Path(folder).resolve():
+        raise ValueError(
+            f"{where}: the file {name!r} is not a file of the report folder; a report only "
+            "embeds files inside its folder"
+        )
+
+
+def check_files(folder, manifest):
+    """ValueError naming the first file listed in the manifest that is missing or changed."""
+    where = Path(folder) / MANIFEST
+    for entry in manifest["tables"] + manifest["figures"]:
+        file = Path(folder) / entry["file"]
+        if not file.is_file():
+            raise ValueError(f"{file} is listed in {where} but missing")
+        if "sha256" not in entry:
+            raise ValueError(
+                f"{where} records no checksum of {entry['file']}, so the folder may mix two "
+                "runs; rerun the command that wrote it"
+            )
+        if _sha256(file) == entry["sha256"]:
+            continue
+        rows = ""
+        if "rows" in entry:
+            found = _count_rows(file)
+            rows = f" ({found} rows; the manifest records {entry['rows']})"
+        raise ValueError(
+            f"{file}{rows} is not the file {where} records: the folder mixes two runs or was "
+            "edited; rerun the command that wrote it"
+        )
+
+
+def _count_rows(file):
+    try:
+        return len(pd.read_csv(file))
+    except Exception:  # only decorates the error message
+        return "unreadable"
 
 
 def _table_html(table, file):
@@ -222,13 +375,15 @@ def render_html(output):
     Raises
     ------
     FileNotFoundError
-        When the folder has no manifest or a listed file is missing.
+        When the folder has no manifest.
+    ValueError
+        Naming the file, when the manifest is not valid JSON or lacks a key, lists a file
+        outside the folder, or a listed file is missing or differs from the one it records
+        (a folder mixing two runs).
     """
     output = Path(output)
-    path = output / MANIFEST
-    if not path.is_file():
-        raise FileNotFoundError(f"{output} holds no {MANIFEST}: not a skhmmgmr report folder")
-    manifest = json.loads(path.read_text())
+    manifest = read_manifest(output)
+    check_files(output, manifest)
     title = html.escape(manifest.get("title", "skhmmgmr report"))
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{title}</title>"]
     parts.append(f"<style>{STYLE}</style></head><body><h1>{title}</h1>")
@@ -247,10 +402,7 @@ def render_html(output):
     if manifest["figures"]:
         parts.append("<h2>Figures</h2>")
     for figure in manifest["figures"]:
-        file = output / figure["file"]
-        if not file.is_file():
-            raise FileNotFoundError(f"{file} is listed in {MANIFEST} but missing")
-        data = base64.b64encode(file.read_bytes()).decode("ascii")
+        data = base64.b64encode((output / figure["file"]).read_bytes()).decode("ascii")
         parts.append(
             f"<figure><img alt='{html.escape(figure['name'])}' "
             f"src='data:image/png;base64,{data}'>"
@@ -267,15 +419,17 @@ def render_html(output):
         parts.append(f"<h2>Versions</h2><p>{html.escape(text)}</p>")
     parts.append("</body></html>")
     page = output / PAGE
-    page.write_text("\n".join(parts), encoding="utf-8")
+    partial = output / f".{PAGE}.partial"
+    try:
+        partial.write_text("\n".join(parts), encoding="utf-8")
+        os.replace(partial, page)
+    finally:
+        partial.unlink(missing_ok=True)
     return page
 
 
 def _section(output, entry, *, level):
-    file = output / entry["file"]
-    if not file.is_file():
-        raise FileNotFoundError(f"{file} is listed in {MANIFEST} but missing")
-    table = pd.read_csv(file)
+    table = pd.read_csv(output / entry["file"])
     caption = html.escape(entry["caption"])
     return f"<h{level} id='{entry['name']}'>{caption}</h{level}>" + _table_html(
         table, entry["file"]

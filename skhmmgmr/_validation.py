@@ -1,4 +1,7 @@
-"""Input checks whose messages name the column and the recording at fault."""
+"""Input checks whose messages name the column and the recording at fault, and the scale of
+values they rely on (round-off constancy, exact binary units)."""
+
+import numbers
 
 import numpy as np
 from scipy import sparse
@@ -62,6 +65,7 @@ def check_target_finite(y, groups):
         values = np.asarray(y)
     except (TypeError, ValueError):
         return
+    check_numeric_target(values)
     # anything not plainly real-valued is left to scikit-learn's own validation
     if values.dtype.kind not in "biuf":
         return
@@ -87,3 +91,93 @@ def column_names_of(estimator, n_columns, prefix="x"):
     if names is not None and len(names) == n_columns:
         return [str(name) for name in names]
     return [f"{prefix}{i}" for i in range(n_columns)]
+
+
+def check_numeric_target(values, name="y"):
+    """Raise a ValueError if the array ``values`` holds strings, dates or other non-numbers.
+
+    Object arrays pass unless they hold a string (missing values such as ``pd.NA`` are left
+    to the finiteness checks, which name the recording).
+    """
+    kind = values.dtype.kind
+    if kind in "biufc" or values.size == 0:
+        return
+    if kind == "O":
+        strings = [v for v in values.ravel() if isinstance(v, str | bytes)]
+        if not strings:
+            return
+        example = strings[0]
+    else:
+        example = str(values.ravel()[0])
+    raise ValueError(
+        f"{name} must be numeric (the target values, e.g. the torque in Nm); got an array of "
+        f"dtype {values.dtype} holding {example!r}"
+    )
+
+
+def check_sampling_period(sampling_period, name="sampling_period"):
+    """Return ``sampling_period`` as a float: a positive, finite number of seconds.
+
+    ``None`` passes (the caller decides whether the time step is needed). A bool is refused:
+    ``True`` is a number in Python, but not a time step.
+    """
+    if sampling_period is None:
+        return None
+    if (
+        isinstance(sampling_period, bool | np.bool_)
+        or not isinstance(sampling_period, numbers.Real)
+        or not np.isfinite(sampling_period)
+        or sampling_period <= 0
+    ):
+        raise ValueError(
+            f"{name} must be a positive number of seconds, got {sampling_period!r}"
+            + (" (a bool is not a time step)" if isinstance(sampling_period, bool) else "")
+        )
+    return float(sampling_period)
+
+
+# A column (or recording of a target) whose standard deviation is at most this fraction of
+# its largest absolute value is constant up to round-off: float64 carries about 16 digits, so
+# such variation is below a few thousand units in the last place of the values themselves.
+CONSTANT_RTOL = 1e-12
+
+
+def constant_to_round_off(spread, magnitude):
+    """Whether a standard deviation ``spread`` is round-off for values up to ``magnitude``
+    (largest absolute value); elementwise, scale-invariant."""
+    return np.asarray(spread) <= CONSTANT_RTOL * np.asarray(magnitude)
+
+
+def binary_unit(magnitude):
+    """The power of two at or just below each ``magnitude`` (1 for 0), elementwise.
+
+    Dividing values by it is exact in floating point and brings the largest into [1, 2):
+    sums of squares then neither overflow nor underflow, whatever the unit of the values.
+    """
+    magnitude = np.asarray(magnitude, dtype=float)
+    exponent = np.frexp(magnitude)[1] - 1
+    return np.where(magnitude > 0, np.ldexp(1.0, exponent), 1.0)
+
+
+# Every standard deviation the model keeps in the data's units must have a square (the
+# variance in covars_ and the JSON file) that float64 holds with all its digits, with room for
+# the factors of the covariance prior: 1e-150..1e150 (float64 spans 2e-308..1.8e308).
+SCALE_RANGE = (1e-150, 1e150)
+
+
+def check_column_scales(scale, column_names):
+    """Raise a ValueError naming the first column whose standard deviation ``scale`` is out of
+    :data:`SCALE_RANGE`, so that its variance in the data's units is not a float64."""
+    low, high = SCALE_RANGE
+    bad = np.flatnonzero((scale < low) | (scale > high))
+    if bad.size == 0:
+        return
+    i = int(bad[0])
+    how = "overflow" if scale[i] > high else "underflow"
+    raise ValueError(
+        f"column {column_names[i]!r} has standard deviation {scale[i]:.3g}: the model keeps "
+        "its means and covariances in the data's units (means_, covars_, the JSON model "
+        f"file), and this column's variance would {how} float64 (standard deviations must "
+        f"lie within {low:g}..{high:g}). Change the column's unit (e.g. multiply it by a "
+        "power of ten) before fitting."
+    )

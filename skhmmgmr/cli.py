@@ -1,7 +1,8 @@
 """Command line: ``skhmmgmr demo | select | report | fit | predict`` (``python -m skhmmgmr``).
 
-Errors the user can fix (a missing file or column, unreadable data) are printed without a
-traceback and end with exit code 2.
+Errors the user can fix (a missing file or column, unreadable data, an output that would
+overwrite a file) are printed without a traceback and end with exit code 2. Reading inputs and
+guarding outputs is :mod:`._cli_files`' job.
 """
 
 import argparse
@@ -10,16 +11,20 @@ import sys
 import time
 from pathlib import Path
 
-import joblib
 import numpy as np
 import pandas as pd
 
+from ._cli_files import (
+    CommandError,
+    check_columns,
+    check_output,
+    in_time_order,
+    load_model,
+    read_data,
+    write_output,
+)
 from .datasets import RECORDING, SPLIT, TARGET, TIME
 from .datasets._schema import META_COLUMNS
-
-
-class CommandError(Exception):
-    """A user-facing error: printed without a traceback, exit code 2."""
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -45,25 +50,6 @@ def _log(args, message):
         print(message, flush=True)
 
 
-def _read_table(path):
-    path = Path(path)
-    if not path.exists():
-        raise CommandError(f"data file not found: {path}")
-    try:
-        if path.suffix in (".parquet", ".pq"):
-            return pd.read_parquet(path)
-        # recording ids are text: "7" and "007" are two drives
-        return pd.read_csv(path, dtype={RECORDING: str})
-    except Exception as exc:  # pandas raises many types for unreadable files
-        raise CommandError(f"cannot read {path}: {exc}") from exc
-
-
-def _check_columns(frame, columns, path):
-    missing = [c for c in columns if c not in frame.columns]
-    if missing:
-        raise CommandError(f"{path}: missing column(s) {missing}; available: {list(frame.columns)}")
-
-
 def _feature_columns(frame, args):
     if args.features:
         return list(args.features)
@@ -71,16 +57,6 @@ def _feature_columns(frame, args):
     return [
         c for c in frame.columns if c not in excluded and pd.api.types.is_numeric_dtype(frame[c])
     ]
-
-
-def _evaluation_table(model, frame, features, target, recording, sampling_period):
-    from .metrics import evaluate_recordings
-
-    groups = frame[recording].to_numpy()
-    pred = model.predict(frame[features], groups=groups)
-    return evaluate_recordings(
-        frame[target].to_numpy(), pred, groups=groups, sampling_period=sampling_period
-    )
 
 
 DEMO_SCALES = {
@@ -161,12 +137,16 @@ def _run_framework(args, data, meta):
         "n_jobs": args.n_jobs,
         **{f"time: {k} [s]": f"{v:.1f}" for k, v in timings.items()},
     }
-    page = write_report(
-        args.output,
-        tables=report_tables(report, per_driver),
-        figures=figures,
-        meta={**meta, "details": details, "timings": timings, "versions": versions()},
-    )
+    try:
+        page = write_report(
+            args.output,
+            tables=report_tables(report, per_driver),
+            figures=figures,
+            meta={**meta, "details": details, "timings": timings, "versions": versions()},
+            overwrite=args.overwrite,
+        )
+    except (ValueError, OSError) as exc:
+        raise CommandError(f"cannot write the report {args.output}: {exc}") from exc
     bar.update()
     bar.close()
     columns = ["rmse", "accuracy", "smoothness", "performance_score", "n_features", "n_states"]
@@ -183,6 +163,7 @@ def command_demo(args):
     """Simulate several drivers, run the whole framework, compare with the baseline on test."""
     from .datasets import make_driving_protocol
 
+    check_output(args.output, overwrite=args.overwrite, report=True)
     scale = DEMO_SCALES["full" if args.full else "default"]
     for name, value in scale.items():
         if getattr(args, name) is None:
@@ -258,14 +239,15 @@ def command_select(args):
     path = Path(args.data)
     if not path.exists():
         raise CommandError(f"data file not found: {path}")
+    check_output(args.output, overwrite=args.overwrite, inputs=[path], report=True)
     source = path
     if path.is_file():
-        source = _read_table(path)
-        _check_columns(source, [args.recording, args.target, args.time], path)
+        source = read_data(path, args.recording, args.split)
+        check_columns(source, [args.recording, args.target, args.time], path)
         if args.split in source.columns and args.split != SPLIT:
             source = source.drop(columns=SPLIT, errors="ignore").rename(columns={args.split: SPLIT})
         if args.features:
-            _check_columns(source, args.features, path)
+            check_columns(source, args.features, path)
     try:
         data = load_recordings(
             source,
@@ -314,37 +296,51 @@ def command_report(args):
 
     try:
         page = render_html(args.result_dir)
-    except (FileNotFoundError, ValueError, KeyError) as exc:
+    except (ValueError, OSError) as exc:
         raise CommandError(str(exc)) from exc
     _log(args, f"Wrote {page}")
     return 0
 
 
+def _ordered_data(args):
+    """The data of ``fit``/``predict``, rows gathered by recording and sorted by time."""
+    frame = read_data(args.data, args.recording)
+    if args.time is None and TIME in frame.columns:
+        args.time = TIME
+    check_columns(frame, [args.recording, *[args.time] * (args.time is not None)], args.data)
+    if args.time is None:
+        _log(args, f"{args.data} has no '{TIME}' column: rows are taken in file order")
+    return in_time_order(frame, args.data, recording=args.recording, time=args.time)
+
+
 def command_fit(args):
     from .estimator import HMMGMRRegressor
 
-    frame = _read_table(args.data)
-    _check_columns(frame, [args.target, args.recording], args.data)
+    check_output(args.output, overwrite=args.overwrite, inputs=[args.data])
+    frame = _ordered_data(args)
+    check_columns(frame, [args.target], args.data)
     features = _feature_columns(frame, args)
-    _check_columns(frame, features, args.data)
+    check_columns(frame, features, args.data)
     model = HMMGMRRegressor(n_states=args.n_states, random_state=args.seed, n_init=args.n_init)
     try:
         model.fit(frame[features], frame[args.target], groups=frame[args.recording].to_numpy())
     except ValueError as exc:
         raise CommandError(f"{args.data}: {exc}") from exc
-    joblib.dump(model, args.output)
+    write_output(args.output, model.export_json)
     _log(args, f"Fitted K={args.n_states} on {len(features)} features; wrote {args.output}")
     return 0
 
 
 def command_predict(args):
-    model_path = Path(args.model)
-    if not model_path.exists():
-        raise CommandError(f"model file not found: {model_path}")
-    model = joblib.load(model_path)
-    frame = _read_table(args.data)
+    data_path = Path(args.data)
+    output = Path(
+        args.output or data_path.with_name(f"{data_path.stem}_predicted{data_path.suffix}")
+    )
+    check_output(output, overwrite=args.overwrite, inputs=[args.data, args.model])
+    model = load_model(args.model)
+    frame = _ordered_data(args)
     features = list(model.feature_names_in_)
-    _check_columns(frame, [*features, args.recording], args.data)
+    check_columns(frame, features, args.data)
     groups = frame[args.recording].to_numpy()
     try:
         estimate, std = model.predict(frame[features], groups=groups, return_std=True)
@@ -356,24 +352,27 @@ def command_predict(args):
     result["estimate_std"] = std
     for k in range(proba.shape[1]):
         result[f"state_{k}"] = proba[:, k]
-    data_path = Path(args.data)
-    output = (
-        Path(args.output)
-        if args.output
-        else data_path.with_name(f"{data_path.stem}_predicted{data_path.suffix}")
-    )
     if output.suffix in (".parquet", ".pq"):
-        result.to_parquet(output)
+        write_output(output, result.to_parquet)
     else:
-        result.to_csv(output, index=False)
+        write_output(output, lambda partial: result.to_csv(partial, index=False))
     _log(args, f"Wrote {output} ({len(result)} rows)")
     return 0
 
 
-def _add_data_options(parser):
+def _add_data_options(parser, time=TIME):
     parser.add_argument("--target", default=TARGET, help="target column")
     parser.add_argument("--recording", default=RECORDING, help="recording-id column")
-    parser.add_argument("--time", default=TIME, help="time column")
+    text = "time column: rows are sorted by it within each recording"
+    if time is None:
+        text += f" (default: '{TIME}' if the file has one, else rows in file order)"
+    parser.add_argument("--time", default=time, help=text)
+
+
+def _add_output_options(parser, default, text):
+    parser.add_argument("--output", default=default, help=text)
+    text = "replace an existing output that is not a skhmmgmr report (never an input)"
+    parser.add_argument("--overwrite", action="store_true", help=text)
 
 
 def _add_framework_options(parser, defaults=None):
@@ -383,7 +382,7 @@ def _add_framework_options(parser, defaults=None):
     parser.add_argument(
         "--n-jobs", type=int, default=-1, help="parallel fits with joblib; -1: all cores"
     )
-    parser.add_argument("--output", default="skhmmgmr_report", help="report folder")
+    _add_output_options(parser, "skhmmgmr_report", "report folder")
     text = "accuracy/smoothness weights of every choice"
     parser.add_argument("--trade-off", default=framework["trade_off"], help=text)
     helps = {
@@ -437,7 +436,7 @@ def build_parser():
         "select",
         help="run the whole framework on your recordings and write a report",
         description="Parameter selection on CSV/Parquet recordings (a file, or a folder with "
-        "one file per recording). Rows of a recording must be in time order. Recordings are "
+        "one file per recording). Rows are sorted by time within each recording. Recordings are "
         "split by the --split column (values train, validation, test); without it they are "
         "drawn at random by recording with --validation-fraction and --test-fraction.",
         **common,
@@ -467,21 +466,21 @@ def build_parser():
 
     fit = sub.add_parser("fit", help="fit a model on CSV/Parquet recordings", **common)
     fit.add_argument("data", help="CSV or Parquet file, one row per sample")
-    _add_data_options(fit)
+    _add_data_options(fit, time=None)
     fit.add_argument("--features", nargs="+", help="feature columns (default: all numeric)")
     fit.add_argument("--n-states", type=int, default=5, help="number of hidden states K")
     fit.add_argument("--n-init", type=int, default=1, help="EM restarts, the best one is kept")
     fit.add_argument("--seed", type=int, default=0, help="random seed")
-    fit.add_argument("--output", default="model.joblib", help="model file to write")
+    _add_output_options(fit, "model.json", "model file to write (portable JSON)")
     fit.set_defaults(handler=command_fit)
 
     predict = sub.add_parser(
         "predict", help="write estimate, std and state probabilities", **common
     )
-    predict.add_argument("model", help="model file written by 'skhmmgmr fit'")
+    predict.add_argument("model", help="model file (portable JSON) written by 'skhmmgmr fit'")
     predict.add_argument("data", help="CSV or Parquet file")
-    _add_data_options(predict)
-    predict.add_argument("--output", help="output file (default: DATA_predicted.EXT)")
+    _add_data_options(predict, time=None)
+    _add_output_options(predict, None, "output file (default: DATA_predicted.EXT)")
     predict.set_defaults(handler=command_predict)
     return parser
 

@@ -19,7 +19,12 @@ from ._estimator_io import ModelIOMixin
 from ._fitted import FittedHMMGMR, Standardization
 from ._gmr import conditional_means, filter_state_probabilities, mix_estimates
 from ._sequences import as_recordings
-from ._validation import check_finite, check_target_finite, column_names_of
+from ._validation import (
+    check_column_scales,
+    check_finite,
+    check_target_finite,
+    column_names_of,
+)
 
 
 class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstimator):
@@ -202,15 +207,10 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
         Y = y.reshape(-1, 1) if y.ndim == 1 else y
         self.n_outputs_ = Y.shape[1]
         recordings = as_recordings(groups, X.shape[0], time=time, min_length=2)
-        check_finite(
-            X, name="X", column_names=column_names_of(self, X.shape[1]), recordings=recordings
-        )
-        check_finite(
-            Y,
-            name="y",
-            column_names=[f"output {i}" for i in range(Y.shape[1])],
-            recordings=recordings,
-        )
+        names = column_names_of(self, X.shape[1])
+        output_names = [f"output {i}" for i in range(Y.shape[1])]
+        check_finite(X, name="X", column_names=names, recordings=recordings)
+        check_finite(Y, name="y", column_names=output_names, recordings=recordings)
         n_samples, n_dims = X.shape[0], X.shape[1] + Y.shape[1]
         if n_samples < self.n_states:
             raise ValueError(
@@ -227,6 +227,7 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
             )
         # The engine's own layout, standardised in place: the only copy of the data it makes.
         standardized, center, scale = Columns.standardized(X, Y)
+        check_column_scales(scale, [*names, *output_names])
         result = self._baum_welch(standardized, recordings)
         if not result.converged:
             warnings.warn(

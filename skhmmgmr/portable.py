@@ -226,6 +226,7 @@ def read_model(data):
         np.concatenate([scaling["input_scale"], scaling["output_scale"]]),
         dims["F"],
     )
+    _check_joint_covariances(joint["covariances"])
     emissions = _joint_emissions(data["joint"], joint)
     try:
         model = FittedHMMGMR(
@@ -239,6 +240,7 @@ def read_model(data):
     except (NotPositiveDefiniteError, np.linalg.LinAlgError) as exc:
         raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
     _check_filter_matches_joint(filtering, model)
+    _check_conditional_covariances(model)
 
     params = _require(data, "estimator_params")
     if not isinstance(params, dict):
@@ -263,6 +265,45 @@ def _joint_emissions(block, joint):
         raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
     except ValueError as exc:
         raise ValueError(f"'joint.covariance_type': {exc}") from exc
+
+
+def _check_joint_covariances(covariances):
+    """Every state's joint covariance must be symmetric and positive definite: the filter
+    reads parts of both triangles, and an asymmetric matrix can give negative variances."""
+    for k, covariance in enumerate(covariances):
+        name = f"'joint.covariances[{k}]' (state {k})"
+        diagonal = np.diag(covariance)
+        if np.any(diagonal <= 0):
+            j = int(np.flatnonzero(diagonal <= 0)[0])
+            raise ValueError(
+                f"{name} has the non-positive variance {float(diagonal[j])!r} in column {j}"
+            )
+        tolerance = 1e-10 * np.sqrt(np.outer(diagonal, diagonal))
+        asymmetric = np.abs(covariance - covariance.T) > tolerance
+        if asymmetric.any():
+            i, j = (int(v[0]) for v in np.nonzero(asymmetric))
+            raise ValueError(
+                f"{name} is not symmetric: entry [{i}, {j}] is {float(covariance[i, j])!r} "
+                f"but entry [{j}, {i}] is {float(covariance[j, i])!r}"
+            )
+        try:
+            np.linalg.cholesky(covariance)
+        except np.linalg.LinAlgError:
+            raise ValueError(f"{name} is not positive definite") from None
+
+
+def _check_conditional_covariances(model):
+    """The covariance of the outputs given the inputs (the predictive variance within a state)
+    must be positive definite too; it is not when the joint one is singular to round-off."""
+    for k, covariance in enumerate(model.gmr.conditional_covariances):
+        try:
+            np.linalg.cholesky(covariance)
+        except np.linalg.LinAlgError:
+            raise ValueError(
+                f"'filter.conditional_covariances[{k}]' (state {k}), the covariance of the "
+                "outputs given the inputs, is not positive definite: 'joint.covariances"
+                f"[{k}]' is singular to round-off"
+            ) from None
 
 
 def _require(data, key, where=""):

@@ -95,7 +95,7 @@ def test_source_and_row_numbers_are_named():
     "time, problem, previous",
     [
         ([0.0, 0.1, 0.2, 0.0, 0.1, 0.05], "goes back in time", "0.1"),
-        ([0.0, 0.1, 0.2, 0.0, 0.1, 0.1], "repeats the time of the previous row", "0.1"),
+        ([0.0, 0.1, 0.2, 0.0, 0.1, 0.1], "repeats the time of row 4", "0.1"),
     ],
 )
 def test_time_must_increase_within_each_recording(time, problem, previous):

@@ -178,6 +178,36 @@ def test_badly_scaled_columns_give_the_same_model(data):
     )
 
 
+@pytest.mark.parametrize(
+    "x_factor, y_factor", [(1e-13, 1.0), (1e-100, 1.0), (1e100, 1.0), (1.0, 1e-13), (1e-13, 1e13)]
+)
+def test_predictions_do_not_depend_on_the_units(data, fitted, x_factor, y_factor):
+    # Standardisation treats a column as constant relative to its own values, so any unit whose
+    # variance float64 holds gives the same model (X * 1e-13 used to be read as constant).
+    X, y, groups = data
+    X_constant = np.column_stack([X, np.full(len(X), 3.7)])
+    reference = HMMGMRRegressor(n_states=3, random_state=0).fit(X_constant, y, groups=groups)
+    scaled = HMMGMRRegressor(n_states=3, random_state=0).fit(
+        X_constant * x_factor, y * y_factor, groups=groups
+    )
+    expected, expected_std = reference.predict(X_constant, groups=groups, return_std=True)
+    pred, std = scaled.predict(X_constant * x_factor, groups=groups, return_std=True)
+    atol = 1e-8 * np.abs(expected).max()
+    np.testing.assert_allclose(pred / y_factor, expected, rtol=1e-8, atol=atol)
+    np.testing.assert_allclose(std / y_factor, expected_std, rtol=1e-8)
+
+
+@pytest.mark.parametrize("factor, how", [(1e160, "overflow"), (1e-300, "underflow")])
+def test_units_whose_variance_float64_cannot_hold_are_refused(data, factor, how):
+    X, y, groups = data
+    with pytest.raises(
+        ValueError, match=rf"column 'x0' has standard deviation .* would {how} float64"
+    ):
+        HMMGMRRegressor(n_states=2).fit(X * factor, y, groups=groups)
+    with pytest.raises(ValueError, match=rf"column 'output 0' .* would {how} float64"):
+        HMMGMRRegressor(n_states=2).fit(X, y * factor, groups=groups)
+
+
 def test_state_that_loses_its_data_stays_finite():
     rng = np.random.default_rng(0)
     X = np.concatenate([rng.normal(0, 1, size=(200, 1)), rng.normal(8, 1, size=(200, 1))])

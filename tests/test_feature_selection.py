@@ -1,7 +1,16 @@
 """Spearman filter and the exhaustive / forward wrappers, on recordings."""
 
 import functools
+import multiprocessing
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
 
+import joblib
 import numpy as np
 import pandas as pd
 import pytest
@@ -13,7 +22,7 @@ from sklearn.model_selection import GroupKFold, PredefinedSplit
 from sklearn.pipeline import make_pipeline
 from threadpoolctl import threadpool_limits
 
-from skhmmgmr import HMMGMRRegressor
+from skhmmgmr import HMMGMRRegressor, StateSelector, _evaluation
 from skhmmgmr._evaluation import shared_evaluations
 from skhmmgmr._forward_paths import ForwardPath
 from skhmmgmr.feature_selection import (
@@ -23,6 +32,7 @@ from skhmmgmr.feature_selection import (
     spearman_relevance,
 )
 from skhmmgmr.metrics import PerformanceScore, performance_score
+from skhmmgmr.selection import compare_subsets, select_parameters
 
 PERIOD = 0.05
 FEATURES = ["f0", "f1", "f2", "f3"]
@@ -221,6 +231,115 @@ def test_memory_cache_returns_identical_results_without_refitting(data, tmp_path
     # a larger search resumes: only the new subsets are fitted
     ExhaustiveFeatureSelector(estimator, **{**params, "max_features": 3}).fit(X, y, groups=groups)
     assert len(FITS) == 4
+
+
+def test_memory_cache_is_keyed_by_the_package_version(data, tmp_path, monkeypatch):
+    # joblib.Memory keys by the cached function's own source and arguments only: results of
+    # another skhmmgmr (or NumPy, SciPy, scikit-learn, numba) must not be served.
+    X, y, groups, cv = data
+    estimator = CountingRegressor(n_states=2, random_state=0)
+    params = dict(max_features=1, cv=cv, sampling_period=PERIOD, memory=str(tmp_path))
+    FITS.clear()
+    first = ExhaustiveFeatureSelector(estimator, **params).fit(X, y, groups=groups)
+    assert len(FITS) == 4
+    FITS.clear()
+    ExhaustiveFeatureSelector(estimator, **params).fit(X, y, groups=groups)
+    assert FITS == []  # same version: served from the cache
+    monkeypatch.setattr(_evaluation, "__version__", "99.0")
+    again = ExhaustiveFeatureSelector(estimator, **params).fit(X, y, groups=groups)
+    assert len(FITS) == 4  # another version: recomputed
+    pd.testing.assert_frame_equal(first.results_, again.results_)
+    monkeypatch.setattr(_evaluation, "_installed_code", lambda: {"numpy": "0.0"})
+    FITS.clear()
+    ExhaustiveFeatureSelector(estimator, **params).fit(X, y, groups=groups)
+    assert len(FITS) == 4  # another numerical library or edited source: recomputed
+
+
+def test_shared_data_folder_is_tracked_and_removed(data, tmp_path, monkeypatch):
+    # The folder of the data shared with the workers is registered with loky's resource
+    # tracker while in use: if the run is killed, the tracker deletes it (see the slow test).
+    from joblib.externals.loky.backend import resource_tracker
+
+    X, y, groups, cv = data
+    calls = []
+    monkeypatch.setattr(resource_tracker, "register", lambda *a: calls.append(("register", *a)))
+    monkeypatch.setattr(resource_tracker, "unregister", lambda *a: calls.append(("free", *a)))
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    selector = ExhaustiveFeatureSelector(cv=cv, max_features=1, sampling_period=PERIOD, n_jobs=2)
+    with joblib.parallel_config(backend="threading"):
+        selector.fit(X, y, groups=groups)
+    [(_, folder, kind), (_, freed, _)] = calls
+    assert (kind, freed) == ("folder", folder)
+    assert Path(folder).parent == tmp_path and not Path(folder).exists()
+
+
+@pytest.mark.filterwarnings("ignore:.*tasks:UserWarning")  # joblib: cancelled tasks
+def test_interrupted_parallel_search_leaves_no_folder_or_worker(data, tmp_path, monkeypatch):
+    X, y, groups, cv = data
+
+    def interrupt(results, **kwargs):
+        for _ in results:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(_evaluation, "tqdm", interrupt)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    selector = ExhaustiveFeatureSelector(cv=cv, max_features=2, sampling_period=PERIOD, n_jobs=2)
+    with pytest.raises(KeyboardInterrupt):
+        selector.fit(X, y, groups=groups)
+    assert list(tmp_path.iterdir()) == []
+    assert not [p for p in multiprocessing.active_children() if "Loky" in p.name]
+
+
+KILLED_RUN = """
+import os, signal
+import joblib, numpy as np
+from skhmmgmr import _evaluation
+from skhmmgmr.feature_selection import ExhaustiveFeatureSelector
+
+def die(results, **kwargs):
+    for _ in results:
+        os.kill(os.getpid(), signal.SIGKILL)
+
+_evaluation.tqdm = die
+rng = np.random.default_rng(0)
+X = np.cumsum(rng.normal(size=(2000, 3)), axis=0)
+with joblib.parallel_config(backend="loky", idle_worker_timeout=1):
+    ExhaustiveFeatureSelector(cv=2, sampling_period=0.05, n_jobs=2).fit(
+        X, X.sum(axis=1), groups=np.repeat(np.arange(4), 500)
+    )
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
+def test_killed_parallel_search_leaves_no_folder(tmp_path):
+    # A run killed outright leaves its workers until their idle timeout (here 1 s, plus up to
+    # 30 s in which they wait for the dead parent); then loky's resource tracker deletes the
+    # shared data folder. It used to stay in the temporary directory for good.
+    env = {**os.environ, "TMPDIR": str(tmp_path)}
+    run = subprocess.run([sys.executable, "-c", KILLED_RUN], env=env, timeout=300, check=False)
+    assert run.returncode == -signal.SIGKILL
+    deadline = time.monotonic() + 120
+    while list(tmp_path.glob("skhmmgmr-*")) and time.monotonic() < deadline:
+        time.sleep(0.5)
+    assert list(tmp_path.glob("skhmmgmr-*")) == []
+
+
+def test_bool_sampling_period_is_refused_by_every_search(data):
+    X, y, groups, cv = data
+    for selector in (
+        ExhaustiveFeatureSelector(cv=cv, sampling_period=True),
+        ForwardFeatureSelector(cv=cv, sampling_period=True),
+        StateSelector(cv=cv, sampling_period=True),
+    ):
+        with pytest.raises(ValueError, match=r"'sampling_period' parameter .*not a bool"):
+            selector.fit(X, y, groups=groups)
+    with pytest.raises(ValueError, match="sampling_period must be a positive number"):
+        compare_subsets(X, y, groups, {"a": ("f0",)}, cv=cv, sampling_period=True)
+    split = np.where(pd.Series(groups).str.startswith("train"), "train", "validation")
+    split[groups == "validation2"] = "test"
+    with pytest.raises(ValueError, match="sampling_period must be a positive number"):
+        select_parameters((X, y, groups), split=split, sampling_period=True)
 
 
 def test_n_jobs_gives_identical_results(data, exhaustive):

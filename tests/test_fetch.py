@@ -7,8 +7,12 @@ URL or from an HTTP server on 127.0.0.1; nothing here touches any other network.
 import hashlib
 import http.server
 import io
+import os
+import re
+import socket
 import tarfile
 import threading
+import time
 import warnings
 import zipfile
 from functools import partial
@@ -16,6 +20,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+try:
+    import fcntl
+except ImportError:  # Windows
+    fcntl = None
 
 from skhmmgmr.datasets import _download, clear_data_home, fetch_comma2k19, get_data_home
 from skhmmgmr.datasets._download import download, extract, list_members, read_manifest
@@ -312,3 +321,185 @@ def test_data_home_env_variable_and_clearing(tmp_path, monkeypatch):
     (tmp_path / "skhmmgmr_data" / "file").write_text("cached")
     clear_data_home()
     assert not (tmp_path / "skhmmgmr_data").exists()
+
+
+# --- interrupted, damaged and failed downloads (issue #17) ---------------------------------
+
+
+def _serving(folder, handler):
+    """Context of an HTTP server on 127.0.0.1 for ``folder``; yields its base URL."""
+
+    class _Context:
+        def __enter__(self):
+            self.server, self.thread, _ = _serve(folder, handler)
+            return f"http://127.0.0.1:{self.server.server_address[1]}/"
+
+        def __exit__(self, *exc):
+            self.server.shutdown()
+            self.server.server_close()
+            self.thread.join(timeout=5)
+
+    return _Context()
+
+
+class _ChunkedCutHandler(_QuietHandler):
+    """Sends half of the file in chunked encoding, then hangs up without the last chunk."""
+
+    protocol_version = "HTTP/1.1"
+
+    def do_GET(self):
+        data = Path(self.translate_path(self.path)).read_bytes()[:1000]
+        self.send_response(200)
+        self.send_header("Transfer-Encoding", "chunked")
+        self.end_headers()
+        self.wfile.write(b"%x\r\n%s\r\n" % (len(data), data))
+        self.wfile.flush()
+        self.close_connection = True
+
+
+class _UnsizedCutHandler(_QuietHandler):
+    """Sends half of the file without a Content-Length header, then hangs up."""
+
+    def do_GET(self):
+        data = Path(self.translate_path(self.path)).read_bytes()
+        self.send_response(200)
+        self.end_headers()
+        self.wfile.write(data[: len(data) // 2])
+        self.wfile.flush()
+        self.close_connection = True
+
+
+class _SlowHandler(_QuietHandler):
+    def do_GET(self):
+        time.sleep(1.0)
+        super().do_GET()
+
+
+class _FailingHandler(_QuietHandler):
+    def do_GET(self):
+        self.send_error(503)
+
+
+def _no_kept_file(home):
+    cache = Path(home) / "comma2k19"
+    return not cache.exists() or [p.name for p in cache.iterdir()] == []
+
+
+@pytest.mark.parametrize(
+    "handler, problem",
+    [
+        (_ChunkedCutHandler, "stopped after 1000 bytes: the connection was cut"),
+        (_UnsizedCutHandler, "not a readable zip archive"),
+    ],
+)
+def test_cut_download_is_never_kept(mirror, tmp_path, handler, problem):
+    with (
+        _serving(mirror[0], handler) as url,
+        pytest.raises(OSError, match=re.escape(repr(url + "Chunk_1.zip")) + ".*" + problem),
+    ):
+        fetch_comma2k19(data_home=tmp_path, base_url=url, checksums={}, timeout=10)
+    assert _no_kept_file(tmp_path)
+
+
+def _damage(data, name):
+    """Flip one byte of the data of the archive member ``name``, leaving its headers intact."""
+    with zipfile.ZipFile(io.BytesIO(data)) as zf:
+        info = zf.getinfo(name)
+    start = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra)
+    data = bytearray(data)
+    data[start] ^= 0xFF
+    return bytes(data)
+
+
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        (lambda data: b"<html>Not the archive</html>", "not a readable zip archive"),
+        (lambda data: data[: len(data) - 10], "not a readable zip archive"),
+        (lambda data: _damage(data, f"Chunk_1/{ROUTE}/41/processed_log/CAN/speed/t"), "CRC"),
+    ],
+    ids=["garbage", "cut", "bad-crc"],
+)
+def test_damaged_archive_without_checksum_is_refused(mirror, tmp_path, content, match):
+    bad = tmp_path / "bad_mirror"
+    bad.mkdir()
+    (bad / "Chunk_1.zip").write_bytes(content((mirror[0] / "Chunk_1.zip").read_bytes()))
+    url = bad.as_uri() + "/Chunk_1.zip"
+    with pytest.raises(OSError, match=f"{re.escape(repr(url))}.*{match}"):
+        fetch_comma2k19(data_home=tmp_path / "home", base_url=bad.as_uri(), checksums={})
+    assert _no_kept_file(tmp_path / "home")
+
+
+def test_damaged_cached_archive_is_downloaded_again(mirror, tmp_path):
+    folder, digest = mirror
+    cache = tmp_path / "comma2k19"
+    cache.mkdir()
+    (cache / "Chunk_1.zip").write_bytes(b"PK\x03\x04 cut by an earlier version")
+    with pytest.raises(OSError, match=r"Chunk_1\.zip.*not a readable zip archive"):
+        fetch_comma2k19(data_home=tmp_path, base_url=folder.as_uri(), download_if_missing=False)
+    with pytest.warns(UserWarning, match=r"Chunk_1\.zip.*downloaded again"):
+        frame = fetch_comma2k19(
+            data_home=tmp_path, base_url=folder.as_uri(), checksums={"Chunk_1.zip": digest}
+        )
+    assert frame["recording"].nunique() == 2
+    assert (cache / "Chunk_1.zip").read_bytes() == (folder / "Chunk_1.zip").read_bytes()
+
+
+def _part(folder, target, tag, age):
+    path = folder / f".{target}.{tag}.part"
+    path.write_bytes(b"x" * 1000)
+    os.utime(path, (time.time() - age, time.time() - age))
+    return path
+
+
+@pytest.mark.skipif(fcntl is None, reason="needs POSIX file locks")
+def test_stale_part_files_are_removed_but_live_ones_kept(mirror, tmp_path):
+    folder, digest = mirror
+    cache = tmp_path / "comma2k19"
+    cache.mkdir()
+    stale = _part(cache, "Chunk_1.zip", "k1ll3d_0", age=3600)
+    other_target = _part(cache, "Chunk_2.zip", "k1ll3d_0", age=3600)
+    live = _part(cache, "Chunk_1.zip", "l1ve_000", age=3600)
+    with open(live, "rb") as held:
+        fcntl.flock(held.fileno(), fcntl.LOCK_EX)
+        fetch_comma2k19(
+            segments=f"{ROUTE}/40",
+            data_home=tmp_path,
+            base_url=folder.as_uri(),
+            checksums={"Chunk_1.zip": digest},
+        )
+        assert not stale.exists()
+        assert other_target.exists() and live.exists()
+    # A later call finds the archive in the cache and still removes dead downloads.
+    stale = _part(cache, "Chunk_1.zip", "k1ll3d_1", age=3600)
+    fetch_comma2k19(
+        segments=f"{ROUTE}/41", data_home=tmp_path, base_url=folder.as_uri(), checksums={}
+    )
+    assert not stale.exists() and not live.exists()
+
+
+def _closed_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_network_errors_name_the_url(mirror, tmp_path):
+    url = f"http://127.0.0.1:{_closed_port()}/"
+    with pytest.raises(OSError, match=re.escape(repr(url + "Chunk_1.zip"))):
+        fetch_comma2k19(data_home=tmp_path, base_url=url, checksums={})
+    with pytest.raises(OSError, match=re.escape(repr(url + "SHA256SUMS"))):
+        fetch_comma2k19(data_home=tmp_path, base_url=url)
+    with _serving(mirror[0], _FailingHandler) as url:
+        with pytest.raises(OSError, match=re.escape(repr(url + "SHA256SUMS")) + ".*503"):
+            fetch_comma2k19(data_home=tmp_path, base_url=url)
+        with pytest.raises(OSError, match=re.escape(repr(url + "Chunk_1.zip")) + ".*503"):
+            fetch_comma2k19(data_home=tmp_path, base_url=url, checksums={})
+    with (
+        _serving(mirror[0], _SlowHandler) as url,
+        pytest.raises(OSError, match=re.escape(repr(url + "Chunk_1.zip")) + ".*timed out"),
+    ):
+        fetch_comma2k19(data_home=tmp_path, base_url=url, checksums={}, timeout=0.2)
+    with pytest.raises(OSError, match=r"Chunk_3\.zip'.*No such file"):
+        fetch_comma2k19(data_home=tmp_path, base_url=mirror[0].as_uri(), chunks=3, checksums={})
+    assert _no_kept_file(tmp_path)

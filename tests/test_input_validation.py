@@ -56,6 +56,21 @@ def test_non_finite_target_names_recording(frame):
         HMMGMRRegressor(n_states=2).fit(X, y, groups=groups)
 
 
+@pytest.mark.parametrize(
+    "target",
+    [
+        np.array(["left", "right"] * 60),
+        pd.Series(["0.1", "x"] * 60, dtype=object),
+        pd.Series(["a", "b"] * 60, dtype="string"),
+        np.array(["2020-01-01"] * 120, dtype="datetime64[D]"),
+    ],
+)
+def test_non_numeric_target_is_refused(frame, target):
+    X, _, groups = frame
+    with pytest.raises(ValueError, match="y must be numeric"):
+        HMMGMRRegressor(n_states=2).fit(X, target, groups=groups)
+
+
 def test_recording_too_short_for_fit(frame):
     X, y, groups = frame
     groups = groups.copy()
@@ -83,6 +98,12 @@ def test_few_rows_per_state_warns(frame):
         ("reg_covar", -1.0, "reg_covar"),
         ("init_params", "spectral", "init_params"),
         ("n_init", 0, "n_init"),
+        # a bool is an int in Python, but not a number of states, iterations or a tolerance
+        ("n_states", True, r"'n_states' parameter .* \(not a bool\)\. Got True"),
+        ("n_iter", np.True_, "'n_iter' parameter"),
+        ("n_init", True, "'n_init' parameter"),
+        ("tol", False, "'tol' parameter"),
+        ("reg_covar", True, "'reg_covar' parameter"),
     ],
 )
 def test_invalid_parameters_are_named(frame, param, value, match):

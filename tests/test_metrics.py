@@ -247,6 +247,46 @@ def test_constant_target_names_the_recording():
         accuracy_score([1.0, 2.0, 3.0, 3.0], Y_PRED, groups=["ok", "ok", "flat", "flat"])
 
 
+@pytest.mark.parametrize("offset", [0.3, 1e6, 1e-20])
+def test_target_constant_to_round_off_names_the_recording(offset):
+    # 0.1 + 0.2 != 0.3: the standard deviation is 4e-17 and the accuracy was -5e17 %
+    flat = np.array([0.1 + 0.2, 0.3, 0.3, 0.1 + 0.2]) * (offset / 0.3)
+    assert flat.std() > 0
+    y_true = np.concatenate([Y_TRUE, flat])
+    groups = ["ok"] * 4 + ["flat"] * 4
+    with pytest.raises(ValueError, match=r"constant in recording 'flat' \(standard deviation"):
+        accuracy_score(y_true, np.concatenate([Y_PRED, flat]), groups=groups)
+
+
+@pytest.mark.parametrize("unit", [1e-13, 1e-200, 1e200])
+def test_accuracy_does_not_depend_on_the_unit(unit):
+    assert_allclose(accuracy_score(Y_TRUE * unit, Y_PRED * unit), ACCURACY, rtol=1e-12)
+
+
+def _score_with(scorer):
+    return scorer(RunningMeanRegressor().fit(Y_TRUE[:, None], Y_TRUE), Y_TRUE[:, None], Y_TRUE)
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda period: smoothness_score(Y_PRED, sampling_period=period),
+        lambda period: performance_score(Y_TRUE, Y_PRED, sampling_period=period),
+        lambda period: evaluate_recordings(Y_TRUE, Y_PRED, sampling_period=period),
+        lambda period: _score_with(PerformanceScore(sampling_period=period)),
+        lambda period: _score_with(SmoothnessScore(sampling_period=period)),
+        lambda period: _score_with(
+            make_performance_scorers(["50/50"], sampling_period=period)["neg_smoothness"]
+        ),
+    ],
+)
+@pytest.mark.parametrize("period", [True, np.True_, False])
+def test_bool_sampling_period_is_refused(call, period):
+    # True is 1 in Python arithmetic, but not a time step
+    with pytest.raises(ValueError, match="sampling_period must be a positive number of seconds"):
+        call(period)
+
+
 def test_missing_or_bad_sampling_information():
     with pytest.raises(ValueError, match="sampling_period .* or time"):
         smoothness_score(Y_PRED)
@@ -378,6 +418,12 @@ def test_normalisation_errors_and_zero_sums(two_by_two):
         normalize_performance(two_by_two.assign(accuracy=[90, 80, 95, np.nan]))
     with pytest.raises(ValueError, match="trade-off string"):
         normalize_performance(two_by_two, weights="fifty")
+    # both weights 0 would score every model 0
+    for weights in ["0/0", (0.0, 0.0), ["50/50", "0/0"]]:
+        with pytest.raises(ValueError, match="'0/0'|\\(0.0, 0.0\\)"):
+            normalize_performance(two_by_two, weights=weights)
+    with pytest.raises(ValueError, match="both the accuracy and the smoothness weight 0"):
+        make_performance_scorers(["0/0"], sampling_period=0.1)
     perfect = two_by_two.assign(accuracy=100.0)
     assert_allclose(normalize_performance(perfect)["accuracy_term"], 0.0)
 

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 import skhmmgmr
-from skhmmgmr import HMMGMRRegressor
+from skhmmgmr import FittedHMMGMR, HMMGMRRegressor
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "plot_portable_filter.py"
 
@@ -211,3 +211,70 @@ def test_restored_model_streams(data, exported):
     rows = X[groups == "b"]
     got = restored.filter_stream().update_batch(rows)
     np.testing.assert_allclose(got, restored.predict(rows), rtol=0, atol=1e-12)
+
+
+# -- covariances that would give NaN standard deviations --------------------------------------
+
+
+def consistent_file(model, covariances, path):
+    """A model file whose joint covariances are ``covariances`` (data units) and whose filter
+    block is derived from them, as a writer that does not check them would produce."""
+    from skhmmgmr._emissions import make_emissions
+    from skhmmgmr.portable import export_json, to_dict
+
+    fitted = model.model_
+    emissions = make_emissions("full", fitted.data_emissions.means, covariances)
+    edited = FittedHMMGMR(
+        fitted.startprob, fitted.transmat, emissions, fitted.standardization, scalar_output=True
+    )
+    export_json(to_dict(edited, estimator_params=model.get_params()), path)
+    return path
+
+
+def test_asymmetric_joint_covariance_is_refused(data, model, tmp_path):
+    # Only the lower triangle is factorised, but the regression reads the upper one of the
+    # input block: this file used to load and give a NaN std on every row.
+    covariances = model.covars_.copy()
+    covariances[1, 0, 1] = 0.0
+    path = consistent_file(model, covariances, tmp_path / "edited.json")
+    with pytest.raises(
+        ValueError,
+        match=r"edited\.json: 'joint\.covariances\[1\]' \(state 1\) is not symmetric: entry "
+        r"\[0, 1\] is 0\.0",
+    ):
+        HMMGMRRegressor.from_json(path)
+
+
+def test_indefinite_joint_covariance_is_refused(model, tmp_path):
+    data = model.to_dict()
+    covariance = np.array(data["joint"]["covariances"][2])
+    covariance[1, 3] = covariance[3, 1] = 2 * np.sqrt(covariance[1, 1] * covariance[3, 3])
+    data["joint"]["covariances"][2] = covariance.tolist()
+    with pytest.raises(ValueError, match=r"'joint.covariances\[2\]' \(state 2\) is not positive"):
+        HMMGMRRegressor.from_dict(data)
+    data["joint"]["covariances"][2][3][3] = -1.0
+    with pytest.raises(ValueError, match=r"\(state 2\) has the non-positive variance -1.0"):
+        HMMGMRRegressor.from_dict(data)
+
+
+def test_conditional_covariance_singular_to_round_off_is_refused(model, tmp_path):
+    # A rank-2 joint covariance plus 1e-16 I factorises, but the variance of the output given
+    # the inputs comes out zero or negative in floating point for some draws.
+    rng = np.random.default_rng(0)
+    covariances = model.covars_.copy()
+    for _ in range(1000):
+        B = rng.normal(size=(4, 3))
+        covariances[3] = B @ B.T + 1e-16 * np.eye(4)
+        try:
+            path = consistent_file(model, covariances, tmp_path / "singular.json")
+        except ValueError:  # not factorised
+            continue
+        data = json.loads(path.read_text())
+        if data["filter"]["conditional_covariances"][3][0][0] <= 0:
+            break
+    else:
+        pytest.skip("no draw is singular to round-off with this LAPACK")
+    with pytest.raises(
+        ValueError, match=r"'filter.conditional_covariances\[3\]' \(state 3\).* not positive"
+    ):
+        HMMGMRRegressor.from_json(path)

@@ -87,12 +87,14 @@ def test_missing_columns_are_listed_with_available_ones(tmp_path):
         load_recordings(_recording(), features=["yaw_rate", "lane"])
 
 
-def test_unsorted_time_is_named(tmp_path):
-    raw = _recording()
-    raw.loc[3, "time"] = 0.05
-    raw.to_parquet(tmp_path / "r2.parquet")
-    with pytest.raises(ValueError, match=r"'r2'.*r2\.parquet.*row 3, time 0\.05.*back in time"):
-        load_recordings(tmp_path / "r2.parquet")
+def test_rows_are_sorted_by_time_within_each_recording(tmp_path):
+    a, b = _recording(seed=1).assign(recording="b"), _recording(seed=2).assign(recording="a")
+    raw = pd.concat([a.iloc[[3, 0, 4, 1, 2]], b.iloc[[1, 0]], a.iloc[[]], b.iloc[[4, 2, 3]]])
+    raw.to_parquet(tmp_path / "shuffled.parquet")
+    raw.to_csv(tmp_path / "shuffled.csv", index=False)
+    expected = load_recordings(pd.concat([a, b], ignore_index=True))
+    for source in (raw, tmp_path / "shuffled.parquet", tmp_path / "shuffled.csv"):
+        pd.testing.assert_frame_equal(load_recordings(source), expected)
 
 
 def test_duplicated_time_is_named():
@@ -100,6 +102,47 @@ def test_duplicated_time_is_named():
     raw.loc[2, "time"] = raw.loc[1, "time"]
     with pytest.raises(ValueError, match=r"'x'.*row 2.*repeats the time"):
         load_recordings(raw)
+    shuffled = raw.iloc[[2, 0, 3, 4, 1]]  # both rows at 0.1 s, now rows 0 and 4, apart
+    with pytest.raises(ValueError, match=r"'x'.*row 4, time 0\.1\).*repeats the time"):
+        load_recordings(shuffled.reset_index(drop=True))
+
+
+@pytest.mark.parametrize("column", ["recording", "run"])
+@pytest.mark.parametrize("ids", [("7", "007"), ("1e3", "1000"), ("TRUE", "True")])
+def test_recording_ids_are_read_as_text(tmp_path, ids, column):
+    raw = pd.concat([_recording().assign(**{column: i}) for i in ids], ignore_index=True)
+    raw.to_csv(tmp_path / "ids.csv", index=False)
+    frame = load_recordings(tmp_path / "ids.csv", recording=column)
+    assert frame["recording"].unique().tolist() == list(ids)
+
+
+def _gzip_cut(path):
+    import gzip
+
+    data = gzip.compress(b"recording,time,x,driver_torque\n" + b"a,0,1,2\n" * 2000)
+    path.write_bytes(data[: len(data) // 2])
+
+
+UNREADABLE = {
+    "empty.csv": (b"", "the file is empty"),
+    "header.csv": (b"recording,time,x,driver_torque\n", "no data row"),
+    "garbage.csv": (bytes(range(256)) * 8, "Cannot read"),
+    "garbage.parquet": (b"PAR1 not really", "Cannot read"),
+    "cut.csv.gz": (_gzip_cut, "Cannot read"),
+    "ragged.csv": (b"recording,time,x,driver_torque\na,0,1,2\na,0.1,1,2,3\n", "fields"),
+    "longer.csv": (b"time,x,driver_torque\n7,0,1,2\n7,0.1,1,2\n", "more fields"),
+    "latin.csv": ("recording,time,vitesse_é\na,0,1\n".encode("latin-1"), "not UTF-8"),
+}
+
+
+@pytest.mark.parametrize("name", UNREADABLE)
+def test_unreadable_files_are_named(tmp_path, name):
+    content, message = UNREADABLE[name]
+    path = tmp_path / name
+    content(path) if callable(content) else path.write_bytes(content)
+    with pytest.raises(ValueError, match=message) as info:
+        load_recordings(path)
+    assert str(path) in str(info.value)
 
 
 @pytest.mark.parametrize("bad, kind", [(np.nan, "NaN"), (np.inf, "an infinite value")])

@@ -1,5 +1,6 @@
 """Driving data: an embedded lane-keeping simulator and loaders for public and own recordings."""
 
+from .._panel import to_panel
 from ._base import clear_data_home, get_data_home
 from ._calibration import CALIBRATION_BANDS, THESIS_TABLE_C2, calibration_table
 from ._comma2k19 import load_comma2k19_segment
@@ -33,6 +34,7 @@ __all__ = [
     "get_data_home",
     "load_comma2k19_segment",
     "load_recordings",
+    "to_panel",
     "DRIVER",
     "FEATURE_NAMES",
     "FEATURE_UNITS",

@@ -21,6 +21,8 @@ BUS = 0
 DRIVER_NAME = "comma2k19"
 TORQUE_UNIT = "raw sensor units"
 _SMOOTHING_SECONDS = 0.25
+# Grids faster than this only interpolate: the CAN messages decoded come at 50 to 83 Hz.
+MAX_SAMPLING_RATE = 1000.0
 
 
 class CANSignal(NamedTuple):
@@ -134,29 +136,104 @@ def _segment_name(path):
 
 
 def check_sampling_rate(sampling_rate):
+    """Return ``sampling_rate`` as a float, refusing what is not a rate in (0, 1000] Hz."""
     if (
         not isinstance(sampling_rate, numbers.Real)
-        or isinstance(sampling_rate, bool)
+        or isinstance(sampling_rate, (bool, np.bool_))
         or not np.isfinite(sampling_rate)
         or sampling_rate <= 0
     ):
         raise ValueError(f"sampling_rate must be a positive number of Hz, got {sampling_rate!r}.")
+    if sampling_rate > MAX_SAMPLING_RATE:
+        raise ValueError(
+            f"sampling_rate must be at most {MAX_SAMPLING_RATE:g} Hz, got {sampling_rate!r}: "
+            "the CAN messages of comma2k19 come at 50 to 83 Hz, so a faster grid only "
+            "interpolates, while its rows and smoothing window grow with the rate (a one-minute "
+            "segment at 100 kHz takes minutes and about 1 GB)."
+        )
     return float(sampling_rate)
 
 
-def _read_frames(path):
-    raw_can = path.joinpath(*_RAW_CAN)
-    times, address, bus, data = (np.load(raw_can / n) for n in ("t", "address", "src", "data"))
+_KINDS = {"fiu": "numbers", "iu": "integers", "S": "byte strings"}
+
+
+class _Segment:
+    """The arrays of a segment folder, checked, with the file and segment named in any error."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def fail(self, name, problem):
+        raise ValueError(f"The file {name} of the comma2k19 segment {str(self.path)!r} {problem}.")
+
+    def load(self, name, kinds, *, length_of=None, column=False):
+        """Load the array of the file ``name``; check its dtype kind, shape and length.
+
+        ``length_of`` is the (file name, array) it must have as many values as; ``column``
+        also allows one column of shape (n, 1).
+        """
+        try:
+            array = np.load(self.path / name, allow_pickle=False)
+        except (ValueError, EOFError) as exc:
+            self.fail(name, f"is not a readable NumPy array (truncated or damaged?): {exc}")
+        if not isinstance(array, np.ndarray) or array.dtype.kind not in kinds:
+            dtype = getattr(array, "dtype", type(array).__name__)
+            self.fail(name, f"holds {dtype} values instead of {_KINDS[kinds]}")
+        if array.ndim != 1 and not (column and array.ndim == 2 and array.shape[1] == 1):
+            self.fail(name, f"holds an array of shape {array.shape}, not one value per time")
+        if length_of is not None and len(array) != len(length_of[1]):
+            self.fail(
+                name,
+                f"has {len(array)} values, but {length_of[0]} has {len(length_of[1])}: the "
+                "files of the segment do not match",
+            )
+        return array.reshape(len(array))
+
+    def times(self, name, *, monotonic=True):
+        """Load the finite times of the file ``name``, checked never to go back if asked."""
+        times = self.load(name, "fiu").astype(float)
+        bad = np.flatnonzero(~np.isfinite(times))
+        if bad.size:
+            self.fail(name, f"holds a time that is not finite at index {bad[0]}")
+        return self.check_order(name, times) if monotonic else times
+
+    def check_order(self, name, times, *, index=None, of=""):
+        """Refuse times that go back; ``index`` gives their positions in the file."""
+        back = np.flatnonzero(np.diff(times) < 0)
+        if back.size:
+            i = int(back[0]) + 1
+            self.fail(
+                name,
+                f"has times{of} that go back at index {i if index is None else index[i]} "
+                f"({times[i - 1]:.10g} s, then {times[i]:.10g} s; {back.size} step(s) back in "
+                "all): the file is damaged, and sorting it would pair the times with the wrong "
+                "values",
+            )
+        return times
+
+
+def _read_frames(segment):
+    folder = "/".join(_RAW_CAN)
+    times = segment.times(f"{folder}/t", monotonic=False)
+    length_of = f"{folder}/t", times
+    address = segment.load(f"{folder}/address", "iu", length_of=length_of)
+    bus = segment.load(f"{folder}/src", "iu", length_of=length_of)
+    data = segment.load(f"{folder}/data", "S", length_of=length_of)
+    if data.dtype.itemsize > 8:
+        segment.fail(f"{folder}/data", f"holds {data.dtype} values: CAN payloads have 8 bytes")
     frames = {}
     for message, name in _MESSAGE_NAMES.items():
         selected = np.flatnonzero((bus == BUS) & (address == message))
         if selected.size < 2:
             raise ValueError(
-                f"The segment {path} has no {name} frames (CAN id {message:#x}) on bus {BUS}. "
-                "Only the Toyota RAV4 segments of comma2k19 (chunks 1 and 2) can be decoded."
+                f"The segment {segment.path} has no {name} frames (CAN id {message:#x}) on bus "
+                f"{BUS}. Only the Toyota RAV4 segments of comma2k19 (chunks 1 and 2) can be "
+                "decoded."
             )
-        order = np.argsort(times[selected], kind="stable")
-        frames[message] = times[selected][order], data[selected][order]
+        # The frames of each message must be in time order (the whole file is, in comma2k19).
+        of = f" of {name} frames (CAN id {message:#x})"
+        segment.check_order(f"{folder}/t", times[selected], index=selected, of=of)
+        frames[message] = times[selected], data[selected]
     return frames
 
 
@@ -181,8 +258,9 @@ def load_comma2k19_segment(path, *, sampling_rate=20.0, recording=None, eps_torq
         Segment folder, such as ``.../b0c9d2329ad1606b|2018-08-02--08-34-47/40`` (the ``|`` of
         the route folder may also be written ``_`` or ``--``).
     sampling_rate : float, default=20.0
-        Rate of the output time grid, in Hz. The CAN messages come at about 50 Hz (torque) and
-        83 Hz (steering, kinematics): a higher rate interpolates, it does not add information.
+        Rate of the output time grid, in Hz, at most 1000. The CAN messages come at about 50 Hz
+        (torque) and 83 Hz (steering, kinematics): a higher rate interpolates, it does not add
+        information.
     recording : str, default=None
         Recording id of the rows; by default the segment name ``route--segment``, for example
         ``"b0c9d2329ad1606b|2018-08-02--08-34-47--40"``.
@@ -205,6 +283,16 @@ def load_comma2k19_segment(path, *, sampling_rate=20.0, recording=None, eps_torq
         is steering"). ``attrs["units"]`` gives every unit; ``attrs["time_origin"]`` maps
         the recording id to the device boot time [s] of its first row, the clock of the other
         files of the segment.
+
+    Raises
+    ------
+    FileNotFoundError
+        When the folder or one of the files read is missing.
+    ValueError
+        Naming the file and the segment, when a file is not a readable NumPy array, has the
+        wrong type, shape or length, or holds times that are not finite or go back (they are
+        never re-sorted); also when the segment has no Toyota steering frames, or
+        ``sampling_rate`` is out of range.
 
     Notes
     -----
@@ -235,13 +323,14 @@ def load_comma2k19_segment(path, *, sampling_rate=20.0, recording=None, eps_torq
         )
     recording = _segment_name(path.resolve()) if recording is None else str(recording)
 
-    frames = _read_frames(path)
+    segment = _Segment(path)
+    frames = _read_frames(segment)
     signals = {
         "steering_wheel_angle": _sum(_decode(frames, STEER_ANGLE), _decode(frames, STEER_FRACTION)),
         "steering_wheel_velocity": _decode(frames, STEER_RATE),
         "yaw_rate": _decode(frames, YAW_RATE),
         "lateral_acceleration": _decode(frames, ACCEL_Y),
-        "speed": _read_signal(path.joinpath(*_SPEED)),
+        "speed": _read_signal(segment, _SPEED),
         TARGET: _decode(frames, STEER_TORQUE_DRIVER),
     }
     if eps_torque:
@@ -291,11 +380,11 @@ def _sum(first, second):
     return times, a + b
 
 
-def _read_signal(folder):
-    times = np.load(folder / "t")
-    values = np.load(folder / "value").reshape(len(times), -1)[:, 0]
-    order = np.argsort(times, kind="stable")
-    return times[order], values[order]
+def _read_signal(segment, parts):
+    folder = "/".join(parts)
+    times = segment.times(f"{folder}/t")
+    values = segment.load(f"{folder}/value", "fiu", length_of=(f"{folder}/t", times), column=True)
+    return times, values
 
 
 def _derivative(values, sampling_rate, window):

@@ -10,15 +10,23 @@ import re
 import shutil
 import tarfile
 import tempfile
+import time
 import zipfile
-from contextlib import contextmanager
-from http.client import IncompleteRead
+import zlib
+from contextlib import contextmanager, suppress
+from http.client import HTTPException, IncompleteRead
 from pathlib import Path, PurePosixPath
 from urllib.error import HTTPError, URLError
 from urllib.parse import urljoin, urlsplit
 from urllib.request import urlopen
 
+try:
+    import fcntl
+except ImportError:  # Windows
+    fcntl = None
+
 _CHUNK_SIZE = 1 << 20
+_PART = ".part"
 _SCHEMES = ("http", "https", "file")
 _SHA256 = re.compile(r"^[0-9a-fA-F]{64}$")
 
@@ -58,13 +66,117 @@ def file_url(base_url, name):
     return urljoin(base_url, name)
 
 
-def download(url, path, *, sha256=None, timeout=60.0):
+class DownloadError(OSError):
+    """A download failed or gave a damaged file; the message names the URL and what failed."""
+
+
+def _failure(url, exc, timeout):
+    """The DownloadError naming ``url`` for a network or server error."""
+    reason = exc.reason if isinstance(exc, URLError) and not isinstance(exc, HTTPError) else exc
+    if isinstance(reason, TimeoutError):
+        reason = f"no answer within timeout={timeout} s ({reason or 'timed out'})"
+    return DownloadError(f"Cannot download {url!r}: {reason}.")
+
+
+def _lock(file):
+    """Hold an advisory lock on an open file, telling other processes it is being written.
+
+    Raises BlockingIOError if another process holds it. Without POSIX locks (Windows), an
+    open file cannot be deleted anyway, which is all :func:`remove_stale_parts` needs.
+    """
+    if fcntl is not None:
+        fcntl.flock(file.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+
+
+def remove_stale_parts(path, before):
+    """Delete the temporary files that dead downloads of ``path`` left in its folder.
+
+    A download killed by the system (a ``KeyboardInterrupt`` cleans up) leaves its hidden
+    ``.part`` file, up to the size of the whole file. Those of ``path`` last written before the
+    time ``before`` (seconds since the epoch) are deleted, except those a running download
+    still holds (locked, or open on Windows).
+
+    Parameters
+    ----------
+    path : path-like
+        The file the downloads were for.
+    before : float
+        Start of the current attempt, as :func:`time.time` gives it.
+    """
+    path = Path(path)
+    pattern = re.compile(rf"^\.{re.escape(path.name)}\.[a-z0-9_]{{8}}{re.escape(_PART)}$")
+    if not path.parent.is_dir():
+        return
+    for candidate in path.parent.iterdir():
+        if not pattern.match(candidate.name):
+            continue
+        try:
+            if candidate.stat().st_mtime >= before:
+                continue
+            with open(candidate, "rb") as file:
+                _lock(file)
+                candidate.unlink()
+        except OSError:  # held by a running download, or already gone
+            continue
+
+
+def check_zip(path):
+    """Raise ValueError unless ``path`` is a complete zip archive whose members are intact.
+
+    The central directory must be readable and every member must pass its CRC-32 check, so a
+    cut download or another file served in its place (such as an HTML error page) is refused
+    even when no checksum is known. Reads the whole archive.
+
+    Parameters
+    ----------
+    path : path-like
+        The file to check.
+    """
+    try:
+        with zipfile.ZipFile(path) as zf:
+            damaged = zf.testzip()
+    except (zipfile.BadZipFile, EOFError, zlib.error, NotImplementedError) as exc:
+        raise ValueError(f"it is not a readable zip archive ({exc})") from exc
+    if damaged is not None:
+        raise ValueError(f"its member {damaged!r} fails its CRC check (damaged data)")
+
+
+def _receive(url, out, timeout):
+    """Write the body of ``url`` to ``out``; return its SHA-256 and the length announced."""
+    digest = hashlib.sha256()
+    n_bytes = 0
+    try:
+        with urlopen(url, timeout=timeout) as response:
+            length = response.headers.get("Content-Length")
+            for block in iter(lambda: response.read(_CHUNK_SIZE), b""):
+                out.write(block)
+                digest.update(block)
+                n_bytes += len(block)
+    except IncompleteRead as exc:
+        raise DownloadError(
+            f"Download of {url!r} stopped after {n_bytes + len(exc.partial)} bytes: the "
+            "connection was cut before the end of the file; nothing was kept. Try again."
+        ) from exc
+    except (OSError, HTTPException) as exc:
+        raise _failure(url, exc, timeout) from exc
+    if length is not None and n_bytes != int(length):
+        raise DownloadError(
+            f"Download of {url!r} stopped after {n_bytes} of {int(length)} bytes; "
+            "nothing was kept. Try again."
+        )
+    return digest.hexdigest()
+
+
+def download(url, path, *, sha256=None, timeout=60.0, check=None):
     """Download ``url`` to ``path`` through a temporary file in the same folder.
 
     The bytes go to a hidden temporary file next to ``path``, which is renamed to ``path``
-    (atomically) only once the whole body was received and, when ``sha256`` is given, its
-    checksum matches. On any failure, including a ``KeyboardInterrupt``, the temporary file is
-    deleted, so ``path`` either does not exist or holds the complete, verified file.
+    (atomically) only once the whole body was received (as long as the server announced, and
+    without a cut connection), its checksum matches when ``sha256`` is given, and ``check``
+    accepts it. On any failure, including a ``KeyboardInterrupt``, the temporary file is
+    deleted, so ``path`` either does not exist or holds the complete, verified file. The
+    temporary files of earlier downloads of ``path`` that were killed are deleted (see
+    :func:`remove_stale_parts`); a download never resumes one.
 
     Parameters
     ----------
@@ -76,39 +188,48 @@ def download(url, path, *, sha256=None, timeout=60.0):
         Expected hexadecimal SHA-256 digest of the file; not checked when None.
     timeout : float, default=60.0
         Seconds to wait for the server at each read.
+    check : callable, default=None
+        Called with the path of the complete temporary file before it is renamed; raises a
+        ValueError saying what is wrong to refuse it (such as :func:`check_zip`).
 
     Returns
     -------
     sha256 : str
         Hexadecimal SHA-256 digest of the downloaded file.
+
+    Raises
+    ------
+    DownloadError
+        An OSError naming ``url`` and what failed: the server or network (including timeouts
+        and HTTP errors), a cut transfer, a checksum mismatch, or ``check``.
     """
     _check_url(url)
     path = Path(path)
     expected = None if sha256 is None else _check_sha256(sha256, path.name)
     path.parent.mkdir(parents=True, exist_ok=True)
-    digest = hashlib.sha256()
-    n_bytes = 0
-    with atomic_open(path, "wb", suffix=".part") as out:
-        with urlopen(url, timeout=timeout) as response:
-            length = response.headers.get("Content-Length")
-            try:
-                for block in iter(lambda: response.read(_CHUNK_SIZE), b""):
-                    out.write(block)
-                    digest.update(block)
-                    n_bytes += len(block)
-            except IncompleteRead as exc:
-                n_bytes += len(exc.partial)
-        if length is not None and n_bytes != int(length):
-            raise OSError(
-                f"Download of {url!r} stopped after {n_bytes} of {int(length)} bytes; "
-                "nothing was kept. Try again."
-            )
-        actual = digest.hexdigest()
-        if expected is not None and actual != expected:
-            raise OSError(
-                f"Checksum mismatch for {url!r}: expected SHA-256 {expected}, got {actual}. "
-                "The file is corrupted or is not the expected version; nothing was kept."
-            )
+    started = time.time()
+    remove_stale_parts(path, started)
+    try:
+        with atomic_open(path, "wb", suffix=_PART) as out:
+            with suppress(OSError):  # a file system without locks: cleaners then keep it
+                _lock(out)
+            actual = _receive(url, out, timeout)
+            out.flush()
+            if expected is not None and actual != expected:
+                raise DownloadError(
+                    f"Checksum mismatch for {url!r}: expected SHA-256 {expected}, got {actual}. "
+                    "The file is corrupted or is not the expected version; nothing was kept."
+                )
+            if check is not None:
+                try:
+                    check(out.name)
+                except ValueError as exc:
+                    raise DownloadError(
+                        f"The download of {url!r} is refused: {exc}. Nothing was kept; try "
+                        "again, or check the URL."
+                    ) from exc
+    finally:
+        remove_stale_parts(path, started)
     return actual
 
 
@@ -134,6 +255,9 @@ def read_manifest(base_url, name="SHA256SUMS", *, timeout=60.0):
     ------
     ValueError
         When a line of the manifest is malformed.
+    DownloadError
+        An OSError naming the manifest's URL, when the server or network fails (other than
+        by not having the manifest).
     """
     url = file_url(base_url, name)
     _check_url(url)
@@ -143,11 +267,13 @@ def read_manifest(base_url, name="SHA256SUMS", *, timeout=60.0):
     except HTTPError as exc:
         if exc.code == 404:
             return None
-        raise
+        raise _failure(url, exc, timeout) from exc
     except URLError as exc:
         if isinstance(exc.reason, FileNotFoundError):
             return None
-        raise
+        raise _failure(url, exc, timeout) from exc
+    except (OSError, HTTPException) as exc:
+        raise _failure(url, exc, timeout) from exc
     checksums = {}
     for line_number, line in enumerate(text.splitlines(), start=1):
         if not line.strip() or line.lstrip().startswith("#"):
@@ -276,14 +402,16 @@ def atomic_open(path, mode="w", *, suffix=""):
     Yields
     ------
     file : file object
-        The temporary file. When the ``with`` block ends normally, the file is closed and
-        renamed (atomically) to ``path``; when it raises anything, including a
-        ``KeyboardInterrupt``, the temporary file is deleted and ``path`` is left as it was.
+        The temporary file; its ``name`` is its path. When the ``with`` block ends normally,
+        the file is closed and renamed (atomically) to ``path``; when it raises anything,
+        including a ``KeyboardInterrupt``, the temporary file is deleted and ``path`` is left as
+        it was.
     """
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    os.close(fd)
     try:
-        with os.fdopen(fd, mode) as file:
+        with open(tmp, mode) as file:
             yield file
         os.replace(tmp, path)
     except BaseException:

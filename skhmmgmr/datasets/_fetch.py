@@ -5,12 +5,23 @@ The generic download, verification and unpacking helpers are in :mod:`._download
 
 import numbers
 import re
+import time
 import warnings
+import zipfile
 from pathlib import Path
 
 from ._base import get_data_home
 from ._comma2k19 import ROUTE_PATTERN, check_sampling_rate, load_comma2k19_segment
-from ._download import atomic_open, download, extract_folders, file_url, list_members, read_manifest
+from ._download import (
+    atomic_open,
+    check_zip,
+    download,
+    extract_folders,
+    file_url,
+    list_members,
+    read_manifest,
+    remove_stale_parts,
+)
 from ._frame import concat_frames
 
 COMMA2K19_URL = "https://huggingface.co/datasets/commaai/comma2k19/resolve/main/"
@@ -83,8 +94,18 @@ class _Chunks:
     def archive(self, chunk):
         name = f"Chunk_{chunk}.zip"
         path = self.root / name
+        remove_stale_parts(path, time.time())
         if path.is_file():
-            return path
+            if zipfile.is_zipfile(path):
+                return path
+            problem = (
+                f"The cached comma2k19 archive {str(path)!r} is not a readable zip archive "
+                "(cut by an interrupted download of an earlier version?)"
+            )
+            if not self.download_if_missing:
+                raise OSError(f"{problem}; delete it, or pass download_if_missing=True.")
+            path.unlink()
+            warnings.warn(f"{problem}; it was deleted and is downloaded again.", stacklevel=4)
         if not self.download_if_missing:
             raise OSError(
                 f"The comma2k19 archive {name} is needed but not in the cache folder "
@@ -94,14 +115,19 @@ class _Chunks:
             self.checksums = read_manifest(self.base_url, timeout=self.timeout) or {}
         expected = self.checksums.get(name)
         digest = download(
-            file_url(self.base_url, name), path, sha256=expected, timeout=self.timeout
+            file_url(self.base_url, name),
+            path,
+            sha256=expected,
+            timeout=self.timeout,
+            check=check_zip,
         )
         if expected is None:
             warnings.warn(
-                f"No SHA-256 checksum is known for {name}, so its download was not verified "
-                f"(its SHA-256 is {digest}; pass checksums={{{name!r}: ...}} to pin it).",
+                f"No SHA-256 checksum is known for {name}: its download was checked as a zip "
+                "archive (the CRC of every member), not against a published checksum (its "
+                f"SHA-256 is {digest}; pass checksums={{{name!r}: ...}} to pin it).",
                 UserWarning,
-                stacklevel=3,
+                stacklevel=4,
             )
         return path
 
@@ -195,12 +221,22 @@ def fetch_comma2k19(
         each a recording named ``route--segment``; columns as in
         :func:`load_comma2k19_segment`.
 
+    Raises
+    ------
+    OSError
+        Naming the URL and what failed, when a download fails (network, timeout, HTTP error,
+        cut connection) or gives a damaged archive (wrong length or checksum, not a readable
+        zip archive, a member failing its CRC check); nothing is kept.
+
     Notes
     -----
     Downloads go to a temporary file in the cache folder, renamed into place only once
-    complete and verified; segments are unpacked into a temporary folder renamed into place,
-    so an interruption never leaves a partial file where the cache expects a complete one.
-    Archive members that would land outside the cache folder are refused.
+    complete and verified (length, checksum when known, and always the zip archive's central
+    directory and the CRC of every member); segments are unpacked into a temporary folder
+    renamed into place, so an interruption never leaves a partial file where the cache expects
+    a complete one. A temporary file that a killed download left is deleted at the next call;
+    a cached archive that is not a readable zip archive is downloaded again. Archive members
+    that would land outside the cache folder are refused.
 
     Examples
     --------

@@ -1,12 +1,13 @@
 """Load a user's own driving recordings from CSV or Parquet files into the tidy frame."""
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from ._frame import META_DEFAULTS, tidy_frame
+from ._frame import META_DEFAULTS, tidy_frame, time_order
 from ._schema import DRIVER, RECORDING, SETTING, SPLIT, TARGET, TIME
 
 _CSV_SUFFIXES = (".csv", ".csv.gz", ".csv.bz2", ".csv.zip", ".csv.xz")
@@ -21,6 +22,70 @@ def _suffix(path):
         if name.endswith(suffix):
             return suffix
     return None
+
+
+def read_table(path, text_columns=()):
+    """Read one CSV or Parquet file, every failure a ValueError naming the file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A file ending in one of the CSV suffixes (``.csv``, ``.csv.gz``...) or ``.parquet``/
+        ``.pq``.
+    text_columns : iterable of str, default=()
+        Columns read as text from a CSV file, so that ids such as ``"007"`` and ``"7"``, or
+        ``"TRUE"`` and ``"True"``, stay distinct; absent ones are ignored.
+
+    Returns
+    -------
+    frame : pandas.DataFrame
+        At least one row.
+
+    Raises
+    ------
+    FileNotFoundError
+        When there is no file at ``path``.
+    ValueError
+        When the file is not CSV or Parquet by its name, is empty or has no data row, is not
+        UTF-8 text, is truncated or corrupt, or a CSV row has more fields than the header.
+    """
+    path = Path(path)
+    suffix = _suffix(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"No recording file at {str(path)!r}.")
+    if suffix is None:
+        raise ValueError(
+            f"Cannot read {str(path)!r}: recording files must be CSV "
+            f"({', '.join(_CSV_SUFFIXES)}) or Parquet ({', '.join(_PARQUET_SUFFIXES)})."
+        )
+    try:
+        if suffix in _PARQUET_SUFFIXES:
+            frame = pd.read_parquet(path)
+        else:
+            with warnings.catch_warnings():
+                # index_col=False: a row longer than the header warns instead of silently
+                # turning the first column into the index
+                warnings.simplefilter("error", pd.errors.ParserWarning)
+                dtype = dict.fromkeys(text_columns, str)
+                frame = pd.read_csv(path, dtype=dtype, index_col=False)
+    except UnicodeDecodeError as exc:
+        raise ValueError(
+            f"Cannot read {str(path)!r}: it is not UTF-8 text (it holds the byte "
+            f"{exc.object[exc.start]:#x}); save it as UTF-8."
+        ) from None
+    except pd.errors.EmptyDataError:
+        raise ValueError(f"Cannot read {str(path)!r}: the file is empty.") from None
+    except pd.errors.ParserWarning as exc:
+        raise ValueError(
+            f"Cannot read {str(path)!r}: a row has more fields than the header ({exc})."
+        ) from None
+    except Exception as exc:  # pandas, pyarrow and the decompressors raise many types
+        text = str(exc).strip()
+        raise ValueError(f"Cannot read {str(path)!r}: {type(exc).__name__}: {text}") from None
+    if frame.empty:
+        columns = [str(c) for c in frame.columns]
+        raise ValueError(f"The file {str(path)!r} holds no data row (columns: {columns}).")
+    return frame
 
 
 def _sources(data, recording):
@@ -46,25 +111,15 @@ def _sources(data, recording):
     stems = {}
     for path in paths:
         suffix = _suffix(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"No recording file at {str(path)!r}.")
-        if suffix is None:
-            raise ValueError(
-                f"Cannot read {str(path)!r}: recording files must be CSV "
-                f"({', '.join(_CSV_SUFFIXES)}) or Parquet ({', '.join(_PARQUET_SUFFIXES)})."
-            )
-        stem = path.name[: -len(suffix)]
+        stem = path.name[: -len(suffix)] if suffix else path.name
         if stem in stems:
             raise ValueError(
                 f"The files {str(stems[stem])!r} and {str(path)!r} would both be recording "
                 f"{stem!r}: rename one of them or give the files a recording column."
             )
         stems[stem] = path
-        if suffix in _CSV_SUFFIXES:
-            # Ids are text: read as numbers, "007" and "7" would be one recording.
-            frame = pd.read_csv(path, dtype={recording: str, DRIVER: str, SPLIT: str})
-        else:
-            frame = pd.read_parquet(path)
+        # Ids are text: read as numbers, "007" and "7" would be one recording.
+        frame = read_table(path, (recording, DRIVER, SPLIT))
         yield f"file {str(path)!r}", frame, stem
 
 
@@ -173,23 +228,25 @@ def load_recordings(
         Columns ``recording``, ``driver``, ``setting``, ``split``, ``time``, the features, and
         ``driver_torque``; recording ids, drivers and splits are text (read as text from CSV
         files, so that ``"007"`` and ``"7"`` stay two recordings). Rows of a recording are
-        contiguous, in their original order; recordings come in the order they first appear.
-        ``attrs["units"]`` maps the time, feature and target columns to their units.
+        contiguous and sorted by time; recordings come in the order they first appear. No row
+        is dropped. ``attrs["units"]`` maps the time, feature and target columns to their
+        units.
 
     Raises
     ------
     ValueError
         Naming the file, recording, column and first offending row (0-based, among the data
-        rows of its source) and time, when a column is missing, a value is NaN or infinite,
-        a recording id, driver or split is empty, times do not strictly increase within a
-        recording (unsorted or duplicated), a recording is not sampled at ``sampling_rate``,
-        or one recording id is in two files.
+        rows of its source) and time, when a file cannot be read (empty, no data row, not
+        UTF-8, truncated, a row longer than the header), a column is missing, a value is NaN
+        or infinite, a recording id, driver or split is empty, a time is repeated within a
+        recording, a recording is not sampled at ``sampling_rate``, or one recording id is in
+        two files.
 
     Notes
     -----
-    Rows of a recording interleaved with rows of others are gathered (stably, keeping their
-    order) rather than refused; times are never sorted, since out-of-order times more likely
-    reveal an error than a harmless shuffle.
+    The rows of every recording are gathered and sorted by time (stably), as the command line
+    does: a file shuffled within its recordings, or with recordings interleaved, gives the
+    frame of the sorted file.
 
     Examples
     --------
@@ -242,8 +299,7 @@ def load_recordings(
         files = owners.loc[owners[RECORDING] == name, _SOURCE].tolist()
         raise ValueError(f"The recording {name!r} is in more than one source: {', '.join(files)}.")
 
-    order = pd.factorize(frame[RECORDING])[0]
-    frame = frame.iloc[np.argsort(order, kind="stable")].reset_index(drop=True)
+    frame = frame.iloc[time_order(frame[RECORDING], frame[TIME])].reset_index(drop=True)
     renamed = {time: TIME, target: TARGET}
     return tidy_frame(
         frame.drop(columns=[_SOURCE, _ROW]),

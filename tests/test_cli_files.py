@@ -1,0 +1,228 @@
+"""The command line's files: row order, recording ids, guarded outputs, the model format."""
+
+import json
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from test_cli import make_recordings
+
+from skhmmgmr._cli_files import CommandError, read_data, write_output
+from skhmmgmr.cli import main
+
+DATA = ["--target", "torque", "--recording", "run", "--time", "t"]
+FIT = ["--features", "f0", "f1", "--n-states", "2", "--quiet"]
+
+
+def _shuffled_within_recordings(data, seed=0):
+    rng = np.random.default_rng(seed)
+    parts = [part.iloc[rng.permutation(len(part))] for _, part in data.groupby("run", sort=False)]
+    return pd.concat(parts, ignore_index=True)
+
+
+@pytest.fixture
+def runs(tmp_path):
+    path = tmp_path / "runs.csv"
+    make_recordings().to_csv(path, index=False)
+    return path
+
+
+@pytest.fixture
+def model(tmp_path, runs):
+    path = tmp_path / "model.json"
+    assert main(["fit", str(runs), *DATA, *FIT, "--output", str(path)]) == 0
+    return path
+
+
+def _error(capsys):
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return err
+
+
+def test_fit_and_predict_sort_rows_by_time_within_each_recording(tmp_path, runs, model):
+    shuffled = tmp_path / "shuffled.csv"
+    _shuffled_within_recordings(pd.read_csv(runs)).to_csv(shuffled, index=False)
+    refit = tmp_path / "refit.json"
+    assert main(["fit", str(shuffled), *DATA, *FIT, "--output", str(refit)]) == 0
+    assert refit.read_text() == model.read_text()
+    for path in (runs, shuffled):
+        assert main(["predict", str(model), str(path), "--recording", "run", "--time", "t"]) == 0
+    expected = pd.read_csv(tmp_path / "runs_predicted.csv")
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "shuffled_predicted.csv"), expected)
+
+
+def test_the_time_column_named_time_is_used_by_default(tmp_path, model):
+    data = make_recordings().rename(columns={"t": "time"})
+    path = tmp_path / "default.csv"
+    _shuffled_within_recordings(data).to_csv(path, index=False)
+    assert main(["predict", str(model), str(path), "--recording", "run", "--quiet"]) == 0
+    result = pd.read_csv(tmp_path / "default_predicted.csv")
+    assert (result.groupby("run", sort=False)["time"].diff().dropna() > 0).all()
+    assert list(pd.unique(result["run"])) == list(pd.unique(data["run"]))
+
+
+@pytest.mark.parametrize("command", ["fit", "predict", "select"])
+def test_a_repeated_time_is_refused_naming_recording_and_time(tmp_path, model, capsys, command):
+    data = make_recordings()
+    data.loc[data.index[data["run"] == "r1"][5], "t"] = 0.5  # row 10 of r1 is at 0.5 s too
+    path = tmp_path / "repeated.csv"
+    _shuffled_within_recordings(data).to_csv(path, index=False)
+    argv = {"fit": ["fit", str(path), *DATA, *FIT], "predict": ["predict", str(model), str(path)]}
+    argv["select"] = ["select", str(path), *DATA, "--output", str(tmp_path / "report")]
+    assert main([*argv[command], *DATA[2:]]) == 2
+    err = _error(capsys)
+    assert "'r1'" in err and "time 0.5" in err and "repeats the time" in err
+    assert "repeated.csv" in err
+
+
+def test_a_time_column_given_but_absent_is_named(runs, capsys):
+    assert main(["fit", str(runs), "--target", "torque", "--recording", "run", "--time", "x"]) == 2
+    assert "missing column(s) ['x']" in _error(capsys)
+
+
+@pytest.mark.parametrize("ids", [("7", "007"), ("1e3", "1000"), ("TRUE", "True")])
+def test_recording_ids_stay_text_in_every_command(tmp_path, model, ids):
+    data = make_recordings(n_recordings=2)
+    data["run"] = data["run"].map({"r0": ids[0], "r1": ids[1]})
+    path = tmp_path / "ids.csv"
+    data.to_csv(path, index=False)
+    assert main(["predict", str(model), str(path), *DATA[2:], "--quiet"]) == 0
+    result = pd.read_csv(tmp_path / "ids_predicted.csv", dtype={"run": str})
+    assert list(pd.unique(result["run"])) == list(ids)
+    # the filter restarts at each recording: the first row of the second one is a first row
+    first = result.groupby("run", sort=False).head(1)[["state_0", "state_1"]].to_numpy()
+    alone = tmp_path / "alone.csv"
+    data[data["run"] == ids[1]].to_csv(alone, index=False)
+    assert main(["predict", str(model), str(alone), *DATA[2:], "--quiet"]) == 0
+    restart = pd.read_csv(tmp_path / "alone_predicted.csv")[["state_0", "state_1"]].to_numpy()
+    np.testing.assert_allclose(first[1], restart[0])
+    assert list(pd.unique(read_data(path, "run")["run"])) == list(ids)
+
+
+def test_fit_writes_the_portable_json_model(model):
+    assert json.loads(model.read_text())["format"] == "skhmmgmr-hmm-gmr"
+
+
+class _Payload:
+    """Unpickling it writes a marker file: what a crafted model file could do."""
+
+    def __init__(self, marker):
+        self.marker = marker
+
+    def __reduce__(self):
+        return Path.write_text, (Path(self.marker), "code ran")
+
+
+def test_predict_never_unpickles_a_model_file(tmp_path, runs, capsys):
+    pickle.loads(pickle.dumps(_Payload(tmp_path / "proof")))
+    assert (tmp_path / "proof").exists()  # the payload is live
+    crafted = tmp_path / "model.joblib"
+    crafted.write_bytes(pickle.dumps(_Payload(tmp_path / "marker")))
+    assert main(["predict", str(crafted), str(runs), "--recording", "run"]) == 2
+    assert not (tmp_path / "marker").exists()
+    err = _error(capsys)
+    assert str(crafted) in err and "pickle" in err
+
+
+@pytest.mark.parametrize(
+    "content", [b"\x00\xff garbage", b'{"format": "skhmmgmr-hmm-gmr", "n_st', b"[1, 2]", b"{}"]
+)
+def test_predict_names_an_unusable_model_file(tmp_path, runs, model, capsys, content):
+    bad = tmp_path / "bad.json"
+    bad.write_bytes(content)
+    assert main(["predict", str(bad), str(runs), "--recording", "run"]) == 2
+    assert f"cannot load the model file {bad}" in _error(capsys)
+    truncated = tmp_path / "truncated.json"
+    truncated.write_text(model.read_text()[: len(model.read_text()) // 2])
+    assert main(["predict", str(truncated), str(runs), "--recording", "run"]) == 2
+    assert str(truncated) in _error(capsys)
+
+
+def test_fit_refuses_to_overwrite_a_file_without_overwrite(tmp_path, runs, capsys):
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine")
+    argv = ["fit", str(runs), *DATA, *FIT, "--output", str(notes)]
+    assert main(argv) == 2
+    assert "--overwrite" in _error(capsys) and notes.read_text() == "mine"
+    assert main([*argv, "--overwrite"]) == 0
+    assert json.loads(notes.read_text())["format"] == "skhmmgmr-hmm-gmr"
+
+
+def test_predict_refuses_to_overwrite_its_default_output(tmp_path, runs, model, capsys):
+    (tmp_path / "runs_predicted.csv").write_text("mine")
+    argv = ["predict", str(model), str(runs), "--recording", "run"]
+    assert main(argv) == 2
+    assert "--overwrite" in _error(capsys)
+    assert (tmp_path / "runs_predicted.csv").read_text() == "mine"
+    assert main([*argv, "--overwrite", "--quiet"]) == 0
+    assert "estimate" in pd.read_csv(tmp_path / "runs_predicted.csv")
+
+
+@pytest.mark.parametrize("input_name", ["runs.csv", "model.json"])
+def test_an_input_is_never_overwritten(tmp_path, runs, model, capsys, input_name):
+    before = (tmp_path / input_name).read_bytes()
+    predict = ["predict", str(model), str(runs), "--recording", "run", "--overwrite"]
+    assert main([*predict, "--output", str(tmp_path / input_name)]) == 2
+    assert "would overwrite the input" in _error(capsys)
+    fit = ["fit", str(runs), *DATA, *FIT, "--overwrite", "--output", str(runs)]
+    assert main(fit) == 2
+    assert (tmp_path / input_name).read_bytes() == before
+
+
+@pytest.mark.parametrize("command", ["fit", "predict", "select"])
+def test_a_missing_or_unusable_output_folder_is_named(tmp_path, runs, model, capsys, command):
+    argv = {
+        "fit": ["fit", str(runs), *DATA, *FIT],
+        "predict": ["predict", str(model), str(runs), "--recording", "run"],
+        "select": ["select", str(runs), *DATA],
+    }[command]
+    assert main([*argv, "--output", str(tmp_path / "nowhere" / "out")]) == 2
+    assert f"the folder {tmp_path / 'nowhere'} does not exist" in _error(capsys)
+    assert main([*argv, "--output", str(runs / "out")]) == 2
+    assert "is not a folder" in _error(capsys)
+
+
+def test_an_unwritable_output_folder_is_named(tmp_path, runs, capsys, monkeypatch):
+    import skhmmgmr._cli_files
+
+    monkeypatch.setattr(skhmmgmr._cli_files.os, "access", lambda *args: False)
+    assert main(["fit", str(runs), *DATA, *FIT, "--output", str(tmp_path / "m.json")]) == 2
+    assert f"the folder {tmp_path} is not writable" in _error(capsys)
+
+
+def test_a_failed_write_keeps_the_previous_file(tmp_path):
+    path = tmp_path / "out.csv"
+    path.write_text("previous")
+
+    def full_disk(partial):
+        Path(partial).write_text("half")
+        raise OSError(28, "No space left on device")
+
+    with pytest.raises(CommandError, match=r"cannot write .*out\.csv: No space left"):
+        write_output(path, full_disk)
+    assert path.read_text() == "previous"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.csv"]
+
+
+def test_select_checks_its_output_folder_before_the_run(tmp_path, runs, capsys, monkeypatch):
+    import functools
+
+    import skhmmgmr.selection
+
+    @functools.wraps(skhmmgmr.selection.select_parameters)  # the CLI reads its defaults
+    def never(*args, **kwargs):
+        raise AssertionError("the selection ran")
+
+    monkeypatch.setattr(skhmmgmr.selection, "select_parameters", never)
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "thesis.tex").write_text("mine")
+    assert main(["select", str(runs), *DATA, "--output", str(folder)]) == 2
+    err = _error(capsys)
+    assert "not a skhmmgmr report folder" in err and "thesis.tex" in err
+    assert (folder / "thesis.tex").read_text() == "mine"
+    assert main(["select", str(runs), *DATA, "--output", str(tmp_path), "--overwrite"]) == 2
+    assert "would overwrite the input" in _error(capsys)
