@@ -32,9 +32,14 @@ chunk of rows:
    (:class:`~skhmmgmr._gaussian.MomentSums`), while the block's rows are still in cache.
 
 An iteration reads the data once and holds no array of the size of the data besides the
-posteriors of one block. The moments of one state (the heaviest of the previous E-step) are
-those of all rows minus the others': every row's posteriors sum to one, so with K=2 only one
-state's products are computed.
+posteriors of one block (and those of the rows that miss a value, if any). The moments of one
+state (the heaviest of the previous E-step) are those of all rows minus the others': every
+row's posteriors sum to one, so with K=2 only one state's products are computed.
+
+Rows with missing values (NaN) take part through their observed columns (the missing-data EM,
+:mod:`skhmmgmr._missing`): the engine's columns hold zeros in their place, so the steps above
+run unchanged; the frames of these rows are then overwritten by their marginal densities, and
+the expected statistics of their missing columns are added to the moments of every state.
 
 The estimator talks to this module only through :class:`Columns`, :func:`fit_hmm`,
 :func:`score_hmm` and :class:`HMMParameters`.
@@ -147,7 +152,7 @@ def _forward_blocks(engine, params):
     density = params.emissions.density(engine.shift)
     for block in engine.blocks:
         start, stop, rec_starts, rec_stops = block
-        frames, log_scale = engine.frames(density, start, stop)
+        frames, log_scale = engine.frames(density, start, stop, params.emissions)
         alpha, scale = np.empty_like(frames), np.empty(stop - start)
         log_likelihood = forward(
             frames,
@@ -174,6 +179,7 @@ class _Expectations:
         self.start_counts = np.zeros(n_states)
         self.transition_sums = np.zeros((n_states, n_states))
         self.sums = MomentSums(n_states, engine.data.values.shape[0], states=self.accumulated)
+        self.missing_moments = 0.0  # what the missing values add (see _missing)
 
     def add(self, block, frames, alpha, scale):
         (start, stop, rec_starts, rec_stops), n_states = block, self.params.n_states
@@ -186,12 +192,16 @@ class _Expectations:
         self.start_counts += posteriors[:, rec_starts].sum(axis=1)
         for lo, hi, _ in self.engine.chunks(start, stop):
             self.sums.add(posteriors[:, lo:hi], self.engine.data.values, start + lo)
+        if self.engine.missing is not None:
+            emissions = self.params.emissions
+            self.missing_moments += self.engine.missing.moments(emissions, posteriors, start, stop)
 
     def statistics(self, log_likelihood):
         engine, remainder = self.engine, self.engine.remainder
         moments = self.sums.result()
         if remainder is not None:
             moments[remainder] = engine.totals - moments[self.accumulated].sum(axis=0)
+        moments += self.missing_moments
         weights, first, second = split_moments(moments)
         engine.remainder = int(np.argmax(weights))
         return Statistics(

@@ -3,7 +3,9 @@
 :class:`Columns` holds the rows once, as columns about a shift plus a row of ones, so that the
 weighted moments of all states are one matrix product per chunk. :class:`EStepData` holds what
 stays constant during a fit: the columns, the recordings grouped into blocks of about one
-cache-sized chunk of rows, the chunk bounds and the moments of all rows.
+cache-sized chunk of rows, the chunk bounds and the moments of all rows, and the rows that miss
+a value (:class:`~skhmmgmr._missing.MissingRows`: their missing values set to zero, their
+frames overwritten by the densities of their observed columns).
 """
 
 from dataclasses import dataclass
@@ -11,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._gaussian import MomentSums, augmented_columns, chunk_size_for
+from ._missing import MissingRows
 from ._validation import binary_unit, constant_to_round_off
 
 # Consecutive short recordings are grouped into blocks of about this many rows.
@@ -35,9 +38,13 @@ class Columns:
 
     @classmethod
     def from_rows(cls, X):
-        """Columns of ``X`` (n_samples, n_features) about its column means (a copy)."""
+        """Columns of ``X`` (n_samples, n_features) about its column means (a copy); the means
+        of the observed values when some are missing (NaN), 0 for a column with none."""
         X = np.asarray(X, dtype=float)
         shift = X.mean(axis=0) if X.shape[0] else np.zeros(X.shape[1])
+        if np.isnan(shift).any():
+            counts = np.sum(~np.isnan(X), axis=0)
+            shift = np.nansum(X, axis=0) / np.maximum(counts, 1)
         return cls(augmented_columns(X, shift), shift)
 
     @classmethod
@@ -51,7 +58,9 @@ class Columns:
         place, one column at a time. Each column is first divided by the power of two just
         below its largest absolute value (exact in floating point), so that no sum or square
         overflows or underflows whatever the column's unit, and the results are those of the
-        unscaled arithmetic (bit for bit when those neither overflow nor underflow).
+        unscaled arithmetic (bit for bit when those neither overflow nor underflow). Missing
+        values (NaN) stay in place and the statistics are those of the observed values; a
+        column with no observed value gets a NaN centre and scale (the caller names it).
         """
         n_samples = blocks[0].shape[0]
         n_features = sum(block.shape[1] for block in blocks)
@@ -65,11 +74,19 @@ class Columns:
         for i in range(n_features):
             column = values[i]
             magnitude = max(column.max(), -column.min()) if n_samples else 0.0
+            observed = slice(None)  # a view: no copy of a complete column
+            if np.isnan(magnitude):  # missing values
+                observed = ~np.isnan(column)
+                if not observed.any():
+                    center[i] = scale[i] = np.nan
+                    continue
+                magnitude = max(column[observed].max(), -column[observed].min())
             power = float(binary_unit(magnitude))
             column /= power
-            mean = column.mean()
+            mean = column[observed].mean()
             column -= mean
-            spread = np.sqrt(np.dot(column, column) / n_samples)
+            values_seen = column[observed]
+            spread = np.sqrt(np.dot(values_seen, values_seen) / values_seen.size)
             center[i] = mean * power
             if constant_to_round_off(spread, magnitude / power):
                 column *= power
@@ -119,12 +136,14 @@ def recording_blocks(recordings, max_rows):
 
 
 class EStepData:
-    """Per-fit constants: the columns, the recording blocks, the chunk size, and the moments
-    of all rows."""
+    """Per-fit constants: the columns, the recording blocks, the chunk size, the moments of
+    all rows, and ``missing``, the rows with a missing value (None when there is none: the
+    missing values of ``X`` given as :class:`Columns` are set to zero in place)."""
 
     def __init__(self, X, recordings, n_states, chunk_size=None, block_size=None):
         self.data = X if isinstance(X, Columns) else Columns.from_rows(X)
         self.shift = self.data.shift
+        self.missing = MissingRows.of(self.data.values[:-1], self.shift, fill=True)
         self.n_states = n_states
         self.step = chunk_size_for(n_states * self.data.n_features, chunk_size)
         self.blocks = [
@@ -152,17 +171,20 @@ class EStepData:
         for lo, hi in bounds:
             yield lo, hi, values[:, start + lo : start + hi]
 
-    def frames(self, density, start, stop):
+    def frames(self, density, start, stop, emissions=None):
         """Emission likelihoods of rows ``start:stop`` scaled to a maximum of one per row.
 
-        ``density`` is the emission's evaluator about the engine's shift. Returns ``(frames,
-        log_scale)``: frames of shape (rows, n_states), C-contiguous, and the sum over the
-        rows of the logarithms of the scales.
+        ``density`` is the evaluator of ``emissions`` about the engine's shift (the emissions
+        are needed when rows miss values). Returns ``(frames, log_scale)``: frames of shape
+        (rows, n_states), C-contiguous, and the sum over the rows of the logarithms of the
+        scales.
         """
         frames = np.empty((stop - start, self.n_states))
         top = np.empty(stop - start)
         for lo, hi, chunk in self.chunks(start, stop):
             density.frames(chunk, frames[lo:hi], top[lo:hi])
+        if self.missing is not None:
+            self.missing.overwrite(emissions, start, stop, frames, top)
         return frames, float(top.sum())
 
     @property

@@ -132,7 +132,8 @@ class ModelIOMixin:
         Parameters
         ----------
         **kwargs : dict
-            Passed to :class:`~skhmmgmr.FilterStream` (``min_log_density``).
+            Passed to :class:`~skhmmgmr.FilterStream` (``min_log_density``; ``missing_values``
+            defaults to the estimator's).
 
         Returns
         -------
@@ -153,7 +154,7 @@ class ModelIOMixin:
         from .streaming import FilterStream
 
         check_is_fitted(self)
-        return FilterStream(self.model_, **kwargs)
+        return FilterStream(self, **kwargs)
 
     def to_dict(self, *, output_names=None):
         """The fitted model as a JSON-ready dict (the portable model format).

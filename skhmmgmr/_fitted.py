@@ -93,7 +93,10 @@ class Standardization:
 
     def log_jacobian(self, n_rows):
         """``log |dz/dx|`` of ``n_rows`` rows: a density in the data's units is the density of
-        the standardised rows minus this (in log)."""
+        the standardised rows minus this (in log). With missing values, ``n_rows`` holds the
+        number of observed values of every column."""
+        if np.ndim(n_rows):
+            return -float(np.dot(n_rows, np.log(self.scale)))
         return -n_rows * float(np.sum(np.log(self.scale)))
 
 

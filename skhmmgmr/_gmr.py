@@ -9,6 +9,11 @@ For every state ``k`` the emission over ``[F, T]`` gives (:meth:`GaussianEmissio
 
 The filter runs the normalised forward recursion on the input marginals only (causal, no
 look-ahead) and mixes the per-state conditional means with the filtered state probabilities.
+
+A row with missing inputs (NaN) is read through its observed inputs (:mod:`skhmmgmr._missing`):
+the gating density of those, and in every state the conditional mean and covariance of the
+outputs given them; a row with no input observed passes the state probabilities through the
+transition matrix and mixes the state output means.
 """
 
 from dataclasses import dataclass
@@ -17,6 +22,7 @@ import numpy as np
 
 from ._gaussian import augmented_columns, chunk_size_for
 from ._kernels import forward
+from ._missing import MissingRows
 
 
 @dataclass(frozen=True)
@@ -58,6 +64,7 @@ def filter_state_probabilities(X, recordings, params, chunk_size=None):
     The input densities are computed chunk by chunk (all states in one product per chunk).
     When no state that the transitions allow explains a row (every product underflows), the
     recursion restarts at that row from the input densities alone instead of producing NaN.
+    A row with missing inputs (NaN) takes the densities of its observed inputs.
     """
     n_samples = X.shape[0]
     n_states, n_inputs = params.n_states, params.gating.n_dims
@@ -67,6 +74,9 @@ def filter_state_probabilities(X, recordings, params, chunk_size=None):
     for start in range(0, n_samples, step):
         rows = slice(start, start + step)
         density.frames(augmented_columns(X[rows]), frames[rows], top[rows])
+    missing = MissingRows.of(X.T)
+    if missing is not None:
+        missing.overwrite(params.gating, 0, n_samples, frames, top)
     alpha = np.empty_like(frames)
     forward(
         frames,
@@ -102,12 +112,33 @@ def _sum_over_states(alpha, values):
     return out
 
 
-def mix_estimates(alpha, state_means, params, return_std=False):
-    """Mix per-state conditional means; optionally the law-of-total-variance std."""
+def gmr_estimates(X, alpha, params, return_std=False):
+    """Estimates of the outputs (and their std) given the state probabilities ``alpha``.
+
+    The conditional means of every state given the inputs of each row (given the observed
+    ones in a row with missing inputs), mixed by :func:`mix_estimates`.
+    """
+    state_means = conditional_means(X, params)
+    missing = MissingRows.of(X.T)
+    if missing is None:
+        return mix_estimates(alpha, state_means, params, return_std=return_std)
+    state_means[missing.rows], added = missing.outputs(params)
+    return mix_estimates(alpha, state_means, params, return_std, added=(missing.rows, added))
+
+
+def mix_estimates(alpha, state_means, params, return_std=False, added=None):
+    """Mix per-state conditional means; optionally the law-of-total-variance std.
+
+    ``added``: ``(rows, variances)``, variances (n_rows, K, n_outputs) added to the states'
+    conditional variances in those rows (rows with missing inputs).
+    """
     estimate = _sum_over_states(alpha, state_means)
     if not return_std:
         return estimate, None
     within = alpha @ params.conditional_variances
+    if added is not None:
+        rows, variances = added
+        within[rows] += np.einsum("nk,nko->no", alpha[rows], variances)
     spread = state_means - estimate[:, np.newaxis, :]
     np.square(spread, out=spread)
     between = _sum_over_states(alpha, spread)

@@ -15,6 +15,7 @@ from ._metrics_table import (
     performance_per_recording,
     recording_metrics,
 )
+from ._panel import has_recording_index, read_row_order
 from ._sequences import as_recordings
 from ._validation import check_sampling_period
 
@@ -130,12 +131,15 @@ class _RecordingScorer(_MetadataRequester):
         estimator : object
             Fitted regressor with ``predict``.
         X : array-like or pandas.DataFrame of shape (n_samples, n_features)
-            Input rows; the rows of a recording must be contiguous and in time order.
+            Input rows; the rows of a recording must be contiguous and in time order, unless
+            the index of ``X`` holds the recordings (and the time): see
+            :func:`skhmmgmr.datasets.to_panel`.
         y_true : array-like of shape (n_samples,) or (n_samples, n_outputs)
             Observed target.
         groups : array-like of shape (n_samples,), default=None
             Recording id of every row, passed directly or routed by scikit-learn's metadata
-            routing. If None, the whole of ``X`` is scored as one recording and an
+            routing. If None, the ``"recording"`` level of the index of ``X``; without one,
+            the whole of ``X`` is scored as one recording and an
             :class:`UngroupedScoringWarning` is emitted.
 
         Returns
@@ -148,13 +152,23 @@ class _RecordingScorer(_MetadataRequester):
                 "takes groups"
             )
         self._check_params()
+        index_time = None
+        if has_recording_index(X):
+            # Recordings in the index: score them in filter order, whatever order the caller
+            # (a resampling search, a permutation) put the rows in.
+            rows = read_row_order(X, groups)
+            X, y_true = rows.to_filter_order(X), rows.to_filter_order(y_true)
+            groups, index_time = rows.groups, rows.time
         sampling_period, time = None, None
         if self._needs_sampling:
             sampling_period, time = self.sampling_period, self._time_of(X)
             if sampling_period is None and time is None:
+                time = index_time
+            if sampling_period is None and time is None:
                 raise ValueError(
                     f"{type(self).__name__} needs the time step of the rows for the "
-                    "smoothness: set sampling_period (seconds) or time_column"
+                    "smoothness: set sampling_period (seconds) or time_column, or give X a "
+                    "'time' index level"
                 )
         y_pred = self._predict(estimator, X, groups)
         return self._sign * self._score_predictions(y_true, y_pred, groups, sampling_period, time)

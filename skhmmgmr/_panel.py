@@ -66,7 +66,7 @@ def has_recording_index(X):
     return index_levels(X)[0] is not None
 
 
-def read_row_order(X, groups=None, time=None):
+def read_row_order(X, groups=None, time=None, *, sort_recordings=False):
     """Recording ids, time stamps and row order of a call, from arguments or the index of X.
 
     ``groups`` and ``time`` given explicitly win over nothing: when the index holds them too,
@@ -78,6 +78,11 @@ def read_row_order(X, groups=None, time=None):
     ----------
     X : array-like, pandas.DataFrame or pandas.Series
     groups, time : array-like of shape (n_samples,), default=None
+    sort_recordings : bool, default=False
+        Put the recordings of an indexed ``X`` in order of their ids (as text) rather than of
+        first appearance, so that the filter order does not depend on how the rows were
+        shuffled: a fit (whose initialization reads the rows in order) then gives the same
+        model for any permutation of the rows.
 
     Returns
     -------
@@ -96,7 +101,11 @@ def read_row_order(X, groups=None, time=None):
         if time is not None:
             _check_agree(time, index_time, "time", "the time level of the index")
         time = index_time
-    codes = pd.factorize(ids, sort=False)[0]
+    codes, uniques = pd.factorize(ids, sort=False)
+    if sort_recordings:
+        rank = np.empty(len(uniques), dtype=np.intp)
+        rank[np.argsort(np.asarray(uniques, dtype=str), kind="stable")] = np.arange(len(uniques))
+        codes = rank[codes]
     if time is None:
         order = np.argsort(codes, kind="stable")
     else:

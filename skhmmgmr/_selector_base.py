@@ -17,6 +17,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._compat import HasMethods, Interval
 from ._evaluation import check_recording_splits, evaluate_models, shared_evaluation_store
+from ._panel import read_row_order
 from ._sequences import as_recordings
 from ._validation import check_finite, check_target_finite, column_names_of
 from .estimator import HMMGMRRegressor
@@ -53,6 +54,9 @@ class RecordingSearchMixin:
     }
 
     def _validate_search(self, X, y, groups):
+        # Recordings (and time order) from the index of X, in one order for any row permutation.
+        rows = read_row_order(X, groups, sort_recordings=True)
+        X, y, groups = rows.to_filter_order(X), rows.to_filter_order(y), rows.groups
         check_target_finite(y, groups)
         # At least one training and one validation row; sparse X is refused (TypeError):
         # the models of the search fit dense rows.

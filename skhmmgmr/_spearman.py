@@ -15,6 +15,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._compat import Interval, StrOptions, _fit_context
 from ._docstrings import fill_shared_parameters
+from ._panel import read_row_order
 from ._sequences import as_recordings
 from ._validation import check_dense, check_finite, check_target_finite, column_names_of
 
@@ -155,6 +156,8 @@ class SpearmanSelector(SelectorMixin, BaseEstimator):
         -------
         self : SpearmanSelector
         """
+        rows = read_row_order(X, groups, sort_recordings=True)  # recordings from the index of X
+        X, y, groups = rows.to_filter_order(X), rows.to_filter_order(y), rows.groups
         check_target_finite(y, groups)
         X, y = validate_data(self, X, y, y_numeric=True, dtype=float, ensure_all_finite=False)
         check_finite(

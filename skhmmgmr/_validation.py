@@ -2,9 +2,11 @@
 values they rely on (round-off constancy, exact binary units)."""
 
 import numbers
+import warnings
 
 import numpy as np
 from scipy import sparse
+from sklearn.utils.validation import check_array, check_consistent_length, validate_data
 
 from ._sequences import as_recordings
 
@@ -28,8 +30,10 @@ def check_dense(values, *, name, by):
         )
 
 
-def check_finite(values, *, name, column_names, recordings):
+def check_finite(values, *, name, column_names, recordings, allow_nan=False):
     """Raise a ValueError naming the first NaN or infinite entry of ``values``.
+
+    With ``allow_nan`` (missing values the model marginalises), only infinities are refused.
 
     Parameters
     ----------
@@ -42,6 +46,8 @@ def check_finite(values, *, name, column_names, recordings):
         Recordings of the rows, to say where the bad entry is.
     """
     finite = np.isfinite(values)
+    if allow_nan:
+        finite |= np.isnan(values)
     if finite.all():
         return
     rows, columns = np.nonzero(~finite)
@@ -54,13 +60,19 @@ def check_finite(values, *, name, column_names, recordings):
     raise ValueError(
         f"Input {name} contains {kind} in column {column_names[column]!r} of recording "
         f"{recording!r} (row {row - start} of the recording, row {row} overall; {n_bad} "
-        "non-finite value(s) in all). Fill or drop them before fitting or predicting: "
-        "a NaN or infinity cannot be filtered."
+        + (
+            "infinite value(s) in all). An infinity is not a missing value: replace it by NaN "
+            "or drop it."
+            if allow_nan
+            else "non-finite value(s) in all). Fill or drop them before fitting or predicting: "
+            "a NaN or infinity cannot be filtered."
+        )
     )
 
 
-def check_target_finite(y, groups):
-    """Name the column and recording of a NaN or infinite target before generic validation."""
+def check_target_finite(y, groups, allow_nan=False):
+    """Name the column and recording of a NaN (unless ``allow_nan``) or infinite target
+    before generic validation."""
     try:
         values = np.asarray(y)
     except (TypeError, ValueError):
@@ -82,7 +94,58 @@ def check_target_finite(y, groups):
     else:
         names = [f"output {i}" for i in range(values.shape[1])]
     recordings = as_recordings(groups, values.shape[0])
-    check_finite(values, name="y", column_names=names, recordings=recordings)
+    check_finite(values, name="y", column_names=names, recordings=recordings, allow_nan=allow_nan)
+
+
+def validate_joint(estimator, X, y, *, allow_nan, reset=True, ensure_all_finite=False):
+    """``validate_data`` of ``X`` and ``y`` (floats, one or several outputs) for ``estimator``.
+
+    ``ensure_all_finite`` applies to ``X`` (the default leaves the check to
+    :func:`check_finite`, which names the recording). ``y`` must be finite, or with
+    ``allow_nan`` may hold NaN (missing values), which ``validate_data`` always refuses.
+    """
+    if not allow_nan or y is None:  # (None: validate_data says that y is required)
+        return validate_data(
+            estimator,
+            X,
+            y,
+            reset=reset,
+            multi_output=True,
+            y_numeric=True,
+            ensure_all_finite=ensure_all_finite,
+            dtype=float,
+        )
+    X = validate_data(
+        estimator, X, "no_validation", reset=reset, ensure_all_finite=ensure_all_finite, dtype=float
+    )
+    y = check_array(
+        y,
+        ensure_2d=False,
+        dtype=float,
+        ensure_all_finite="allow-nan",
+        input_name="y",
+        estimator=estimator,
+    )
+    check_consistent_length(X, y)
+    return X, y
+
+
+def check_enough_rows(n_samples, n_states, n_dims):
+    """Refuse fewer rows than states; warn when the full covariances of ``n_states`` states
+    over ``n_dims`` columns rest on the regularisation."""
+    if n_samples < n_states:
+        raise ValueError(
+            f"n_states={n_states} is more than the data support: every state needs at "
+            f"least one row, and X has n_samples={n_samples}"
+        )
+    if n_samples < n_states * (n_dims + 1):
+        warnings.warn(
+            f"n_states={n_states} states over {n_dims} columns need at least "
+            f"{n_states * (n_dims + 1)} rows for full covariances; with {n_samples} "
+            "rows they are determined by reg_covar.",
+            UserWarning,
+            stacklevel=4,
+        )
 
 
 def column_names_of(estimator, n_columns, prefix="x"):
@@ -166,8 +229,15 @@ SCALE_RANGE = (1e-150, 1e150)
 
 
 def check_column_scales(scale, column_names):
-    """Raise a ValueError naming the first column whose standard deviation ``scale`` is out of
-    :data:`SCALE_RANGE`, so that its variance in the data's units is not a float64."""
+    """Raise a ValueError naming the first column whose standard deviation ``scale`` is NaN
+    (no observed value) or out of :data:`SCALE_RANGE`, so that its variance in the data's
+    units is not a float64."""
+    empty = np.flatnonzero(np.isnan(scale))
+    if empty.size:
+        raise ValueError(
+            f"column {column_names[int(empty[0])]!r} is missing (NaN) in every row: the model "
+            "cannot marginalise a column it has never seen; drop it."
+        )
     low, high = SCALE_RANGE
     bad = np.flatnonzero((scale < low) | (scale > high))
     if bad.size == 0:

@@ -17,13 +17,17 @@ from ._em_init import INIT_METHODS
 from ._emissions import EMISSION_FAMILIES, REFUSED_COVARIANCE_TYPES, emission_family
 from ._estimator_io import ModelIOMixin
 from ._fitted import FittedHMMGMR, Standardization
-from ._gmr import conditional_means, filter_state_probabilities, mix_estimates
+from ._gmr import filter_state_probabilities, gmr_estimates
+from ._missing import observed_counts
+from ._panel import read_row_order
 from ._sequences import as_recordings
 from ._validation import (
     check_column_scales,
+    check_enough_rows,
     check_finite,
     check_target_finite,
     column_names_of,
+    validate_joint,
 )
 
 
@@ -72,6 +76,15 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
         works on standardised columns (zero mean, unit variance), so the value is relative to
         each column's variance: constant, collinear and badly scaled columns are all handled
         by the same regularisation. ``0`` gives maximum likelihood.
+    missing_values : {"error", "marginalize"}, default="error"
+        What a NaN in ``X`` (or in ``y`` for ``fit``) means. "error": it is refused, naming
+        its column and recording. "marginalize": a missing value; a row takes part through
+        its observed columns only (missing-data EM: the states' marginal densities of those
+        columns, and expected statistics of the missing ones; the k-means initialisation
+        sees missing values as their column's mean), and prediction conditions on the
+        observed inputs of each row (a row with none passes the state probabilities through
+        the transition matrix). Infinities are refused either way. See the user guide,
+        "Missing inputs".
     random_state : int, RandomState instance or None, default=None
         Seed of the initialisation, for reproducible fits.
     verbose : int, default=0
@@ -117,6 +130,22 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
     penalized_log_likelihood_history_ : ndarray
         The same for every entry of ``log_likelihood_history_``; non-decreasing up to
         round-off (1e-9 relative).
+    longest_recording_ : int or None
+        Rows of the longest training recording (``None`` when fitted without recordings):
+        ``predict`` warns when it gets more rows than that without recordings.
+
+    Notes
+    -----
+    Recordings reach the model as ``groups`` (one recording id per row, routed by
+    scikit-learn's metadata routing) or with the rows themselves: a pandas ``X`` whose index
+    has a level ``"recording"`` (and optionally ``"time"``, see
+    :func:`skhmmgmr.datasets.to_panel`). Tools that never pass ``groups`` on
+    (``cross_val_predict``, built-in scorers, ``permutation_importance``, successive halving,
+    conformal wrappers) keep the index, so their results are per recording. With a ``time``
+    level the rows may come in any order: the filter runs in time order and the results come
+    back in the caller's row order.
+    ``fit`` takes the recordings of such an ``X`` in order of their ids (as text), so that any
+    shuffle of the rows gives the same model.
 
     See Also
     --------
@@ -145,6 +174,7 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
         "n_init": [Interval(Integral, 1, None, closed="left")],
         "init_params": [StrOptions(set(INIT_METHODS))],
         "reg_covar": [Interval(Real, 0, None, closed="left")],
+        "missing_values": [StrOptions({"error", "marginalize"})],
         "random_state": ["random_state"],
         "verbose": ["verbose"],
     }
@@ -167,6 +197,7 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
         n_init=1,
         init_params="kmeans",
         reg_covar=1e-6,
+        missing_values="error",
         random_state=None,
         verbose=0,
     ):
@@ -177,6 +208,7 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
         self.n_init = n_init
         self.init_params = init_params
         self.reg_covar = reg_covar
+        self.missing_values = missing_values
         self.random_state = random_state
         self.verbose = verbose
 
@@ -187,11 +219,13 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
         Parameters
         ----------
         X : array-like of shape (n_samples, n_features)
-            Input features, rows of a recording contiguous and in time order.
+            Input features, rows of a recording contiguous and in time order, or a DataFrame
+            with the recordings (and the time) in its index (see Notes).
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
             Outputs (the driver torque).
         groups : array-like of shape (n_samples,), default=None
-            Recording id of every row; ``None`` means one recording.
+            Recording id of every row; ``None`` means the recording level of the index of
+            ``X``, or else one recording.
         time : array-like of shape (n_samples,), default=None
             Optional time stamps, checked to increase within every recording.
 
@@ -200,31 +234,30 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
         self : HMMGMRRegressor
         """
         emission_family(self.covariance_type)  # refuses "diag" and "spherical", saying why
-        check_target_finite(y, groups)
-        X, y = validate_data(
-            self, X, y, multi_output=True, y_numeric=True, ensure_all_finite=False, dtype=float
+        # Recordings of an indexed X in order of their ids: the initialization reads the rows
+        # in order, so a shuffle of the rows (a resampling search) must not change it.
+        rows = read_row_order(X, groups, time, sort_recordings=True)
+        X, y, groups, time = (
+            rows.to_filter_order(X),
+            rows.to_filter_order(y),
+            rows.groups,
+            rows.time,
         )
+        allow_nan = self.missing_values == "marginalize"
+        check_target_finite(y, groups, allow_nan=allow_nan)
+        X, y = validate_joint(self, X, y, allow_nan=allow_nan)
         Y = y.reshape(-1, 1) if y.ndim == 1 else y
         self.n_outputs_ = Y.shape[1]
         recordings = as_recordings(groups, X.shape[0], time=time, min_length=2)
+        # Without recordings there is nothing to compare a later prediction's length with.
+        self.longest_recording_ = None if groups is None else int(recordings.lengths.max())
         names = column_names_of(self, X.shape[1])
         output_names = [f"output {i}" for i in range(Y.shape[1])]
-        check_finite(X, name="X", column_names=names, recordings=recordings)
-        check_finite(Y, name="y", column_names=output_names, recordings=recordings)
-        n_samples, n_dims = X.shape[0], X.shape[1] + Y.shape[1]
-        if n_samples < self.n_states:
-            raise ValueError(
-                f"n_states={self.n_states} is more than the data support: every state needs at "
-                f"least one row, and X has n_samples={n_samples}"
-            )
-        if n_samples < self.n_states * (n_dims + 1):
-            warnings.warn(
-                f"n_states={self.n_states} states over {n_dims} columns need at least "
-                f"{self.n_states * (n_dims + 1)} rows for full covariances; with {n_samples} "
-                "rows they are determined by reg_covar.",
-                UserWarning,
-                stacklevel=2,
-            )
+        check_finite(X, name="X", column_names=names, recordings=recordings, allow_nan=allow_nan)
+        check_finite(
+            Y, name="y", column_names=output_names, recordings=recordings, allow_nan=allow_nan
+        )
+        check_enough_rows(X.shape[0], self.n_states, X.shape[1] + Y.shape[1])
         # The engine's own layout, standardised in place: the only copy of the data it makes.
         standardized, center, scale = Columns.standardized(X, Y)
         check_column_scales(scale, [*names, *output_names])
@@ -245,7 +278,7 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
             scalar_output=y.ndim == 1,
             feature_names=getattr(self, "feature_names_in_", None),
         )
-        jacobian = self.model_.standardization.log_jacobian(n_samples)
+        jacobian = self.model_.standardization.log_jacobian(observed_counts(X, Y))
         self.n_iter_ = result.n_iter
         self.converged_ = result.converged
         self.log_likelihood_ = result.log_likelihood + jacobian
@@ -303,12 +336,29 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
 
     def _validate_inputs(self, X, groups, time):
         check_is_fitted(self)
-        X = validate_data(self, X, reset=False, ensure_all_finite=False, dtype=float)
-        recordings = as_recordings(groups, X.shape[0], time=time)
-        check_finite(
-            X, name="X", column_names=column_names_of(self, X.shape[1]), recordings=recordings
+        rows = read_row_order(X, groups, time)
+        X = validate_data(
+            self, rows.to_filter_order(X), reset=False, ensure_all_finite=False, dtype=float
         )
-        return self.model_.standardization.inputs(X), recordings
+        if rows.groups is None:
+            self._warn_if_one_long_recording(X.shape[0])
+        recordings = as_recordings(rows.groups, X.shape[0], time=rows.time)
+        names, allow_nan = column_names_of(self, X.shape[1]), self.missing_values == "marginalize"
+        check_finite(X, name="X", column_names=names, recordings=recordings, allow_nan=allow_nan)
+        return self.model_.standardization.inputs(X), recordings, rows
+
+    def _warn_if_one_long_recording(self, n_samples):
+        longest = getattr(self, "longest_recording_", None)
+        if longest is not None and n_samples > longest:
+            warnings.warn(
+                f"{n_samples} rows without groups are filtered as ONE recording, longer than "
+                f"the longest training recording ({longest} rows). If they hold several "
+                "recordings, pass groups=<recording id per row>, or give X a pandas index with "
+                "a 'recording' level (skhmmgmr.datasets.to_panel), so that the filter restarts "
+                "at every recording.",
+                UserWarning,
+                stacklevel=3,
+            )
 
     def predict_state_proba(self, X, groups=None, time=None):
         """Filtered state probabilities ``alpha_t,k`` given the inputs up to each row.
@@ -326,8 +376,9 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
         alpha : ndarray of shape (n_samples, n_states)
             Rows sum to one.
         """
-        standardized, recordings = self._validate_inputs(X, groups, time)
-        return filter_state_probabilities(standardized, recordings, self.model_.gmr)
+        standardized, recordings, rows = self._validate_inputs(X, groups, time)
+        alpha = filter_state_probabilities(standardized, recordings, self.model_.gmr)
+        return rows.to_caller_order(alpha)
 
     def predict(self, X, groups=None, time=None, return_std=False):
         """Causal GMR estimate of the outputs, filtered recording by recording.
@@ -349,18 +400,16 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
         y_pred : ndarray of shape (n_samples,) or (n_samples, n_outputs)
         y_std : ndarray of the same shape, only when ``return_std`` is True
         """
-        standardized, recordings = self._validate_inputs(X, groups, time)
+        standardized, recordings, rows = self._validate_inputs(X, groups, time)
         model = self.model_
         alpha = filter_state_probabilities(standardized, recordings, model.gmr)
-        state_means = conditional_means(standardized, model.gmr)
-        estimate, std = mix_estimates(alpha, state_means, model.gmr, return_std=return_std)
+        estimate, std = gmr_estimates(standardized, alpha, model.gmr, return_std=return_std)
         estimate = model.standardization.outputs(estimate)
-        if model.scalar_output:
-            estimate = estimate[:, 0]
+        estimate = rows.to_caller_order(estimate[:, 0] if model.scalar_output else estimate)
         if not return_std:
             return estimate
         std = model.standardization.output_std(std)
-        return estimate, (std[:, 0] if model.scalar_output else std)
+        return estimate, rows.to_caller_order(std[:, 0] if model.scalar_output else std)
 
     def transform(self, X, groups=None, time=None):
         """Filtered state probabilities, as features (see :meth:`predict_state_proba`).
@@ -411,12 +460,23 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
         log_likelihood : float
         """
         check_is_fitted(self)
-        X, y = validate_data(self, X, y, reset=False, multi_output=True, dtype=float)
+        rows = read_row_order(X, groups)
+        allow_nan = self.missing_values == "marginalize"
+        X, y = validate_joint(
+            self,
+            rows.to_filter_order(X),
+            rows.to_filter_order(y),
+            allow_nan=allow_nan,
+            reset=False,
+            ensure_all_finite="allow-nan" if allow_nan else True,
+        )
         Y = y.reshape(-1, 1) if y.ndim == 1 else y
-        recordings = as_recordings(groups, X.shape[0])
+        if rows.groups is None:
+            self._warn_if_one_long_recording(X.shape[0])
+        recordings = as_recordings(rows.groups, X.shape[0], time=rows.time)
         scaling = self.model_.standardization
         log_likelihood = score_hmm(scaling.joint(X, Y), recordings, self.model_.hmm_parameters())
-        return log_likelihood + scaling.log_jacobian(X.shape[0])
+        return log_likelihood + scaling.log_jacobian(observed_counts(X, Y))
 
     def n_parameters(self):
         """Number of free parameters of the fitted HMM (for information criteria)."""
@@ -435,5 +495,5 @@ class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstima
         tags = super().__sklearn_tags__()
         tags.target_tags.required = True
         tags.target_tags.multi_output = True
-        tags.input_tags.allow_nan = False
+        tags.input_tags.allow_nan = self.missing_values == "marginalize"
         return tags

@@ -38,7 +38,12 @@ The file is one JSON object (format ``"skhmmgmr-hmm-gmr"``, ``format_version`` 1
 The filter (METHOD.md section 2): ``alpha_1 ∝ pi * b(z_1)``, ``alpha_t ∝ (alpha_{t-1} @ A) *
 b(z_t)``, estimate ``sum_k alpha_t,k m_k(z_t)``, where ``b_k`` is the Gaussian density of the
 input marginal; densities are taken relative to the largest one, and if every product
-``prior * b`` is zero the recursion restarts from ``b`` alone.
+``prior * b`` is zero the recursion restarts from ``b`` alone. With
+``estimator_params["missing_values"] == "marginalize"`` NaN inputs are missing values: ``b_k``
+is then the density of the observed inputs ``o`` alone (1 if none), and ``m_k`` the
+regression applied to ``z`` completed by ``z_m = mu_m - (P_mm)^-1 P_mo (z_o - mu_o)``, with
+the input precision ``P = U_k U_k^T``; the conditional covariance gains
+``coef_m (P_mm)^-1 coef_m^T``.
 """
 
 import json

@@ -13,7 +13,9 @@ preallocated buffer, so that an update is a handful of small NumPy calls on fixe
   give the log-densities of all states in one more product.
 
 The stream reads a :class:`~skhmmgmr.FittedHMMGMR` (an estimator's ``model_``): the gating
-density, the regressions and the standardisation are that object's.
+density, the regressions and the standardisation are that object's. A sample with missing
+inputs (NaN, when they are marginalised) takes a slower path: the Gaussians of every state
+conditioned on its observed inputs (:func:`~skhmmgmr._missing.gmr_given_observed`).
 """
 
 import math
@@ -23,11 +25,15 @@ import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
 from ._fitted import FittedHMMGMR
+from ._missing import gmr_given_observed
+from ._panel import read_row_order
+from ._sequences import as_recordings
 
 FLAG_OK = "ok"
 FLAG_NON_FINITE = "non-finite"
 FLAG_OUTLIER = "outlier"
 FLAG_RESTARTED = "restarted"
+FLAG_MISSING = "missing"
 _HELD_FLAGS = (FLAG_NON_FINITE, FLAG_OUTLIER)
 _MAX_STANDARDISED = 1e100
 
@@ -36,7 +42,7 @@ class FilterStream:
     """Causal HMM-GMR filter of a fitted :class:`~skhmmgmr.HMMGMRRegressor`, one sample a call.
 
     Streaming a recording sample by sample gives the estimates of ``model.predict`` on the whole
-    recording (up to round-off), as long as no sample is flagged (see Notes). The stream copies
+    recording (up to round-off), as long as no sample is held (see Notes). The stream copies
     the model's parameters when it is created: refitting the model later does not change it.
 
     Parameters
@@ -48,15 +54,25 @@ class FilterStream:
         A sample whose input log-density, in the standardised units the model works in, is below
         this value in every state is an outlier (see Notes). The default flags exactly the
         samples whose densities all underflow to zero in double precision.
+    missing_values : {"error", "marginalize"}, default=None
+        What a NaN input means. "error": the sample is held (flag ``"non-finite"``).
+        "marginalize": the input is missing; the sample is filtered on its observed inputs,
+        as ``predict`` of a model with ``missing_values="marginalize"`` does (flag
+        ``"missing"``). ``None``: the estimator's ``missing_values`` when ``model`` is an
+        estimator, "error" for a :class:`~skhmmgmr.FittedHMMGMR`.
 
     Attributes
     ----------
     last_flag_ : str
         What happened at the last update: ``"ok"``, ``"restarted"`` (accepted; the transitions
         allowed no state that explains the sample, so the filter restarted from the input
-        densities, as ``predict`` does), ``"non-finite"`` or ``"outlier"`` (both held).
+        densities, as ``predict`` does), ``"missing"`` (accepted; some or all inputs were NaN
+        and marginalised), ``"non-finite"`` or ``"outlier"`` (both held).
     n_samples_ : int
         Number of samples given since the last :meth:`reset`, held ones included.
+    recording_ : object or None
+        Recording of the last batch given with a ``"recording"`` index level (see
+        :meth:`update_batch`); ``None`` after :meth:`reset` and for plain input.
     n_features_in_ : int
         Number of inputs of one sample.
     feature_names_in_ : ndarray of str
@@ -70,7 +86,10 @@ class FilterStream:
     estimates that follow equal those of a stream that never saw the held sample. Two kinds
     of sample are held:
 
-    - ``"non-finite"``: a NaN or infinite input;
+    - ``"non-finite"``: an infinite input, or a NaN one unless missing values are
+      marginalised (``missing_values="marginalize"``: the sample is then filtered on its
+      observed inputs, and a sample with none passes the state probabilities through the
+      transition matrix);
     - ``"outlier"``: finite inputs so far from every state that all input log-densities are below
       ``min_log_density`` (or standardised inputs whose absolute values sum above 1e100, where
       the densities would overflow). ``predict`` would extrapolate the nearest state's linear
@@ -95,7 +114,17 @@ class FilterStream:
     'non-finite'
     """
 
-    def __init__(self, model, *, min_log_density=math.log(np.finfo(float).tiny)):
+    def __init__(
+        self, model, *, min_log_density=math.log(np.finfo(float).tiny), missing_values=None
+    ):
+        if missing_values is None:
+            missing_values = getattr(model, "missing_values", "error")
+        if missing_values not in ("error", "marginalize"):
+            raise ValueError(
+                f"missing_values must be 'error' or 'marginalize', got {missing_values!r}"
+            )
+        self.missing_values = missing_values
+        self._marginalize = missing_values == "marginalize"
         if not isinstance(model, FittedHMMGMR):
             check_is_fitted(model)
             model = model.model_
@@ -116,6 +145,8 @@ class FilterStream:
         # A^T @ alpha is a faster BLAS call than alpha @ A for these tiny sizes.
         self._transmat_t = np.ascontiguousarray(params.transmat.T, dtype=float)
         self._conditional_variances = np.ascontiguousarray(params.conditional_variances)
+        # Samples with missing inputs: the read-out conditioned on their observed inputs.
+        self._gmr, self._added = params, None
 
         # [z, 1] @ weights = [the gating density's quadratic-form terms of every state,
         # m_k(z) for every k]; log b_k(z) = norm_k - (sum of the squares of state k's terms).
@@ -169,6 +200,7 @@ class FilterStream:
         self._last_estimate = self._prior_estimate
         self.last_flag_ = FLAG_OK
         self.n_samples_ = 0
+        self.recording_ = None
         return self
 
     @property
@@ -223,30 +255,35 @@ class FilterStream:
         """Advance the filter with the standardised sample in ``self._z``."""
         self.n_samples_ += 1
         z_list = self._z_inputs.tolist()
-        # NaN and infinity propagate into the sum; huge inputs would overflow the squares.
-        if not sum(map(abs, z_list)) < _MAX_STANDARDISED:
-            all_finite = all(map(math.isfinite, z_list))
-            return self._hold(FLAG_OUTLIER if all_finite else FLAG_NON_FINITE)
         product, whitened, means = self._work
-        np.dot(self._z, self._weights, out=product)
-        np.multiply(whitened, whitened, out=self._squares_head)
-        log_prob = self._log_prob
-        np.dot(self._squares, self._block_sum, out=log_prob)
-        log_prob_list = log_prob.tolist()
-        top = max(log_prob_list)
-        if not (top >= self.min_log_density and math.isfinite(sum(log_prob_list))):
-            return self._hold(FLAG_OUTLIER)
-        # Densities relative to the best state, as predict does: the largest is exactly 1.
-        np.subtract(log_prob, top, out=log_prob)
-        np.exp(log_prob, out=log_prob)
+        # NaN and infinity propagate into the sum; huge inputs would overflow the squares.
+        if sum(map(abs, z_list)) < _MAX_STANDARDISED:
+            np.dot(self._z, self._weights, out=product)
+            np.multiply(whitened, whitened, out=self._squares_head)
+            log_prob = self._log_prob
+            np.dot(self._squares, self._block_sum, out=log_prob)
+            log_prob_list = log_prob.tolist()
+            top = max(log_prob_list)
+            if not (top >= self.min_log_density and math.isfinite(sum(log_prob_list))):
+                return self._hold(FLAG_OUTLIER)
+            # Densities relative to the best state, as predict does: the largest is exactly 1.
+            np.subtract(log_prob, top, out=log_prob)
+            frames, flag, self._added = np.exp(log_prob, out=log_prob), FLAG_OK, None
+        else:
+            all_finite = all(map(math.isfinite, z_list))
+            if all_finite or not self._marginalize or any(map(math.isinf, z_list)):
+                return self._hold(FLAG_OUTLIER if all_finite else FLAG_NON_FINITE)
+            frames, flag = self._missing_frames(means), FLAG_MISSING
+            if frames is None:
+                return self._hold(FLAG_OUTLIER)
         alpha = self._alpha
-        np.multiply(self._prior, log_prob, out=alpha)
+        np.multiply(self._prior, frames, out=alpha)
         total = sum(alpha.tolist())
         if total > 0.0:
-            self.last_flag_ = FLAG_OK
+            self.last_flag_ = flag
         else:
-            alpha[:] = log_prob
-            total = sum(log_prob.tolist())
+            alpha[:] = frames
+            total = sum(frames.tolist())
             self.last_flag_ = FLAG_RESTARTED
         np.multiply(alpha, 1.0 / total, out=alpha)
         np.dot(self._transmat_t, alpha, out=self._prior)
@@ -259,6 +296,23 @@ class FilterStream:
             estimate = np.dot(alpha, means) * self._output_scale + self._output_center
             self._last_estimate = estimate.copy()
         return estimate
+
+    def _missing_frames(self, means):
+        """Scaled input densities of a sample whose NaN inputs are missing, given its observed
+        inputs (None for an outlier); writes the state output means given them into ``means``
+        and the variances they add to the conditional ones into ``self._added``."""
+        missing = np.isnan(self._z_inputs)
+        z = np.where(missing, 0.0, self._z_inputs)[np.newaxis]
+        if not np.sum(np.abs(z)) < _MAX_STANDARDISED:
+            return None
+        log_prob, state_means, added = gmr_given_observed(self._gmr, z, missing[np.newaxis])
+        log_prob = log_prob[0]
+        top = log_prob.max()
+        if not (missing.all() or top >= self.min_log_density and np.isfinite(log_prob).all()):
+            return None
+        means[:] = state_means[0, :, 0] if self._scalar_output else state_means[0]
+        self._added = added[0]
+        return np.exp(log_prob - top)
 
     def _hold(self, flag):
         self.last_flag_ = flag
@@ -277,13 +331,19 @@ class FilterStream:
         estimate = alpha @ means
         spread = means - estimate
         variance = alpha @ self._conditional_variances + alpha @ (spread * spread)
+        if self._added is not None:
+            variance += alpha @ self._added
         std = np.sqrt(variance) * self._output_scale
         return float(std[0]) if self._scalar_output else std
 
     def update_batch(self, X, return_std=False, return_flag=False):
         """Filter several consecutive samples, carrying the filter state on.
 
-        Equivalent to calling :meth:`update` on every row in turn.
+        Equivalent to calling :meth:`update` on every row in turn. A DataFrame whose index
+        has a ``"recording"`` level (see :func:`skhmmgmr.datasets.to_panel`) restarts the
+        filter (:meth:`reset`) wherever the recording changes, also from the last row of the
+        previous batch (``recording_``), and is filtered in time order when the index has a
+        ``"time"`` level; the results come back in the caller's row order.
 
         Parameters
         ----------
@@ -301,13 +361,17 @@ class FilterStream:
         std : ndarray of the same shape, only when ``return_std`` is True
         flags : ndarray of str of shape (n_samples,), only when ``return_flag`` is True
         """
-        X = self._as_batch(X)
+        rows = read_row_order(X)
+        X = self._as_batch(rows.to_filter_order(X))
+        restarts = self._recording_starts(rows.groups, X.shape[0])
         shape = (X.shape[0],) if self._scalar_output else (X.shape[0], self._n_outputs)
         estimates = np.empty(shape)
         std = np.empty(shape) if return_std else None
         flags = np.empty(X.shape[0], dtype=object) if return_flag else None
         z_inputs = self._z_inputs
         for i, row in enumerate(X):
+            if i in restarts:
+                self.reset().recording_ = restarts[i]
             np.subtract(row, self._input_center, out=z_inputs)
             np.divide(z_inputs, self._input_scale, out=z_inputs)
             estimates[i] = self._step()
@@ -315,8 +379,20 @@ class FilterStream:
                 std[i] = self._std()
             if return_flag:
                 flags[i] = self.last_flag_
-        result = (estimates,) + tuple(a for a in (std, flags) if a is not None)
-        return result if len(result) > 1 else estimates
+        result = tuple(rows.to_caller_order(a) for a in (estimates, std, flags) if a is not None)
+        return result if len(result) > 1 else result[0]
+
+    def _recording_starts(self, groups, n_samples):
+        """{row: recording id} of the rows where a recording of an indexed batch begins."""
+        if groups is None or n_samples == 0:
+            return {}
+        recordings = as_recordings(groups, n_samples)
+        starts = {
+            int(start): rec for rec, start in zip(recordings.ids, recordings.starts, strict=True)
+        }
+        if self.recording_ is not None and recordings.ids[0] == self.recording_:
+            del starts[0]  # the batch goes on with the recording of the previous batch
+        return starts
 
     def _as_row(self, features):
         names = getattr(self, "feature_names_in_", None)

@@ -1,17 +1,13 @@
 """Tests of the comma2k19 segment loader and of the big-endian CAN signal decoder."""
 
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _comma2k19_data import SEGMENT, SEGMENT_NAME, needs_segment
 
 from skhmmgmr.datasets import FEATURE_UNITS, TARGET, load_comma2k19_segment
-from skhmmgmr.datasets._comma2k19 import decode_big_endian_signal
-
-SEGMENT = Path("/work/shared/data/comma2k19/b0c9d2329ad1606b--2018-08-02--08-34-47/40")
-SEGMENT_NAME = "b0c9d2329ad1606b|2018-08-02--08-34-47--40"
-needs_segment = pytest.mark.skipif(not SEGMENT.is_dir(), reason="comma2k19 example not present")
+from skhmmgmr.datasets._comma2k19_can import decode_big_endian_signal
 
 WHEELBASE = 2.65
 STEERING_RATIO = 16.88

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _comma2k19_data import SEGMENT
 
 from skhmmgmr.datasets import fetch_comma2k19, load_comma2k19_segment
 
-SEGMENT = Path("/work/shared/data/comma2k19/b0c9d2329ad1606b--2018-08-02--08-34-47/40")
 pytestmark = pytest.mark.skipif(not SEGMENT.is_dir(), reason="comma2k19 example not present")
 CAN = Path("processed_log", "CAN")
 

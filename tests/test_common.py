@@ -36,6 +36,8 @@ SEARCH = {"sampling_period": PERIOD, "cv": ONE_RECORDING}
 # Every public estimator, with small valid parameters under which every check can run.
 ESTIMATORS = [
     HMMGMRRegressor(n_states=2, random_state=0),
+    # NaN inputs marginalised: allow_nan, so the checks also fit and predict with NaN
+    HMMGMRRegressor(n_states=2, missing_values="marginalize", random_state=0),
     SpearmanSelector(k=1),
     ExhaustiveFeatureSelector(max_features=1, **SEARCH),
     ForwardFeatureSelector(max_features=1, **SEARCH),

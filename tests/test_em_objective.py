@@ -221,3 +221,21 @@ def test_objective_never_falls_on_the_issue_case(eighteen_thesis_recordings, n_s
     X, y, groups = eighteen_thesis_recordings
     model = fit_quietly(HMMGMRRegressor(n_states=n_states, random_state=seed), X, y, groups)
     assert_non_decreasing(model.penalized_log_likelihood_history_)
+
+
+@pytest.mark.parametrize("n_states", [2, 5])
+def test_objective_never_falls_with_missing_values(six_thesis_recordings, n_states):
+    # The missing-data EM (marginal densities, expected statistics of the missing columns)
+    # on the same nearly collinear features: 10 % of the inputs and 5 % of the torque
+    # missing at random, and every 50th row missing altogether.
+    X, y, groups = six_thesis_recordings
+    rng = np.random.default_rng(n_states)
+    X = np.where(rng.random(X.shape) < 0.1, np.nan, X)
+    y = np.where(rng.random(y.shape) < 0.05, np.nan, y)
+    X[::50], y[::50] = np.nan, np.nan
+    model = HMMGMRRegressor(
+        n_states=n_states, missing_values="marginalize", n_iter=30, random_state=0
+    )
+    model = fit_quietly(model, X, y, groups)
+    assert len(model.penalized_log_likelihood_history_) > 5
+    assert_non_decreasing(model.penalized_log_likelihood_history_)

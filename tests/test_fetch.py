@@ -1,7 +1,8 @@
 """Offline tests of the download helpers and of fetch_comma2k19.
 
 Archives are built at test time from the comma2k19 example segment and served from a file://
-URL or from an HTTP server on 127.0.0.1; nothing here touches any other network.
+URL or from an HTTP server on 127.0.0.1; nothing here touches any other network. Range reads,
+resumed downloads and the scan are in test_fetch_ranges.py.
 """
 
 import hashlib
@@ -26,11 +27,12 @@ try:
 except ImportError:  # Windows
     fcntl = None
 
-from skhmmgmr.datasets import _download, clear_data_home, fetch_comma2k19, get_data_home
-from skhmmgmr.datasets._download import download, extract, list_members, read_manifest
+from _comma2k19_data import ROUTE, SEGMENT
+from _http_server import Server
 
-SEGMENT = Path("/work/shared/data/comma2k19/b0c9d2329ad1606b--2018-08-02--08-34-47/40")
-ROUTE = "b0c9d2329ad1606b|2018-08-02--08-34-47"
+from skhmmgmr.datasets import clear_data_home, fetch_comma2k19, get_data_home
+from skhmmgmr.datasets._download import extract, list_members
+from skhmmgmr.datasets._remote import read_manifest
 
 
 def _files(folder):
@@ -72,23 +74,6 @@ class _QuietHandler(http.server.SimpleHTTPRequestHandler):
         super().do_GET()
 
 
-class _TruncatingHandler(_QuietHandler):
-    """Announces the whole file, sends half of it, then hangs up."""
-
-    def do_GET(self):
-        path = Path(self.translate_path(self.path))
-        if not path.is_file():
-            self.send_error(404)
-            return
-        data = path.read_bytes()
-        self.send_response(200)
-        self.send_header("Content-Length", str(len(data)))
-        self.end_headers()
-        self.wfile.write(data[: len(data) // 2])
-        self.wfile.flush()
-        self.close_connection = True
-
-
 def _serve(folder, handler):
     handler = type("Handler", (handler,), {"requests": []})
     server = http.server.ThreadingHTTPServer(
@@ -102,20 +87,18 @@ def _serve(folder, handler):
 
 @pytest.fixture
 def http_mirror(mirror):
-    server, thread, requests = _serve(mirror[0], _QuietHandler)
-    try:
-        yield f"http://127.0.0.1:{server.server_address[1]}/", requests
-    finally:
-        server.shutdown()
-        server.server_close()
-        thread.join(timeout=5)
+    with Server(mirror[0]) as server:
+        yield server.url, server.log
 
 
 def test_fetch_from_file_url(mirror, tmp_path):
     folder, digest = mirror
     home = tmp_path / "home"
     frame = fetch_comma2k19(
-        data_home=home, base_url=folder.as_uri() + "/", checksums={"Chunk_1.zip": digest}
+        data_home=home,
+        base_url=folder.as_uri() + "/",
+        method="archive",
+        checksums={"Chunk_1.zip": digest},
     )
     names = [f"{ROUTE}--40", f"{ROUTE}--41"]
     assert list(frame["recording"].unique()) == names
@@ -129,13 +112,32 @@ def test_fetch_from_file_url(mirror, tmp_path):
     assert not [p for p in cache.rglob(".*")]
 
 
+def test_fetch_keeps_the_driver_spans_of_each_segment(mirror, tmp_path):
+    pytest.importorskip("cantools")
+    pytest.importorskip("opendbc")
+    folder, digest = mirror
+    frame = fetch_comma2k19(
+        data_home=tmp_path,
+        base_url=folder.as_uri() + "/",
+        checksums={"Chunk_1.zip": digest},
+        engagement=True,
+        steering="driver",
+    )
+    names = [f"{ROUTE}--40/span0", f"{ROUTE}--41/span0"]
+    assert list(frame["recording"].unique()) == names
+    assert set(frame.attrs["time_origin"]) == set(names)
+    assert (frame[["openpilot_steer_request", "eps_lka_active"]] == 0).all().all()
+
+
 def test_fetch_over_http_with_manifest_then_from_cache(http_mirror, tmp_path):
     url, requests = http_mirror
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        frame = fetch_comma2k19(segments=f"{ROUTE}/41", data_home=tmp_path, base_url=url)
+        frame = fetch_comma2k19(
+            segments=f"{ROUTE}/41", data_home=tmp_path, base_url=url, method="archive"
+        )
     assert (frame["recording"] == f"{ROUTE}--41").all()
-    assert sorted(requests) == ["/Chunk_1.zip", "/SHA256SUMS"]
+    assert sorted({path for _, path, _ in requests}) == ["/Chunk_1.zip", "/SHA256SUMS"]
 
     n_requests = len(requests)
     again = fetch_comma2k19(
@@ -184,36 +186,9 @@ def test_checksum_mismatch_keeps_nothing(mirror, tmp_path):
         fetch_comma2k19(
             data_home=tmp_path,
             base_url=mirror[0].as_uri() + "/",
+            method="archive",
             checksums={"Chunk_1.zip": "0" * 64},
         )
-    assert _files(tmp_path) == []
-
-
-def test_truncated_download_keeps_nothing(mirror, tmp_path):
-    server, thread, _ = _serve(mirror[0], _TruncatingHandler)
-    try:
-        url = f"http://127.0.0.1:{server.server_address[1]}/"
-        with pytest.raises(OSError, match="stopped after"):
-            download(url + "Chunk_1.zip", tmp_path / "Chunk_1.zip", timeout=10)
-    finally:
-        server.shutdown()
-        server.server_close()
-        thread.join(timeout=5)
-    assert _files(tmp_path) == []
-
-
-def test_interrupted_download_keeps_nothing(tmp_path, monkeypatch):
-    class Response(io.BytesIO):
-        headers = {}
-
-        def read(self, size=-1):
-            if self.tell() > 0:
-                raise KeyboardInterrupt
-            return super().read(10)
-
-    monkeypatch.setattr(_download, "urlopen", lambda url, timeout: Response(b"x" * 100))
-    with pytest.raises(KeyboardInterrupt):
-        fetch_comma2k19(data_home=tmp_path, base_url="http://127.0.0.1:9/", checksums={})
     assert _files(tmp_path) == []
 
 
@@ -223,7 +198,12 @@ def test_unverified_download_warns_with_digest(mirror, tmp_path):
     bare.mkdir()
     (bare / "Chunk_1.zip").symlink_to(folder / "Chunk_1.zip")
     with pytest.warns(UserWarning, match=digest):
-        fetch_comma2k19(segments=f"{ROUTE}/40", data_home=tmp_path / "home", base_url=bare.as_uri())
+        fetch_comma2k19(
+            segments=f"{ROUTE}/40",
+            data_home=tmp_path / "home",
+            base_url=bare.as_uri(),
+            method="archive",
+        )
     assert read_manifest(bare.as_uri()) is None
 
 
@@ -246,6 +226,7 @@ def test_unknown_segment_is_named(mirror, tmp_path):
         ({"chunks": []}, "chunks"),
         ({"sampling_rate": -1}, "sampling_rate"),
         ({"base_url": "ftp://127.0.0.1/"}, "only http"),
+        ({"method": "torrent"}, "method"),
     ],
 )
 def test_invalid_arguments(kwargs, match, tmp_path):
@@ -385,19 +366,22 @@ def _no_kept_file(home):
     return not cache.exists() or [p.name for p in cache.iterdir()] == []
 
 
+@pytest.mark.parametrize("method", ["range", "archive"])
 @pytest.mark.parametrize(
     "handler, problem",
     [
-        (_ChunkedCutHandler, "stopped after 1000 bytes: the connection was cut"),
-        (_UnsizedCutHandler, "not a readable zip archive"),
+        (_ChunkedCutHandler, "payload is not completed|range requests"),
+        (_UnsizedCutHandler, "connection was cut|range requests"),
     ],
 )
-def test_cut_download_is_never_kept(mirror, tmp_path, handler, problem):
+def test_cut_download_is_never_kept(mirror, tmp_path, handler, problem, method):
+    # Both servers ignore Range headers and hang up early: nothing of it is kept (a cut
+    # before the first complete block leaves no part to resume).
     with (
         _serving(mirror[0], handler) as url,
-        pytest.raises(OSError, match=re.escape(repr(url + "Chunk_1.zip")) + ".*" + problem),
+        pytest.raises(OSError, match=re.escape(repr(url + "Chunk_1.zip")) + f".*({problem})"),
     ):
-        fetch_comma2k19(data_home=tmp_path, base_url=url, checksums={}, timeout=10)
+        fetch_comma2k19(data_home=tmp_path, base_url=url, method=method, checksums={}, timeout=10)
     assert _no_kept_file(tmp_path)
 
 
@@ -420,13 +404,16 @@ def _damage(data, name):
     ],
     ids=["garbage", "cut", "bad-crc"],
 )
-def test_damaged_archive_without_checksum_is_refused(mirror, tmp_path, content, match):
+@pytest.mark.parametrize("method", ["range", "archive"])
+def test_damaged_archive_without_checksum_is_refused(mirror, tmp_path, content, match, method):
     bad = tmp_path / "bad_mirror"
     bad.mkdir()
     (bad / "Chunk_1.zip").write_bytes(content((mirror[0] / "Chunk_1.zip").read_bytes()))
     url = bad.as_uri() + "/Chunk_1.zip"
     with pytest.raises(OSError, match=f"{re.escape(repr(url))}.*{match}"):
-        fetch_comma2k19(data_home=tmp_path / "home", base_url=bad.as_uri(), checksums={})
+        fetch_comma2k19(
+            data_home=tmp_path / "home", base_url=bad.as_uri(), method=method, checksums={}
+        )
     assert _no_kept_file(tmp_path / "home")
 
 
@@ -439,7 +426,10 @@ def test_damaged_cached_archive_is_downloaded_again(mirror, tmp_path):
         fetch_comma2k19(data_home=tmp_path, base_url=folder.as_uri(), download_if_missing=False)
     with pytest.warns(UserWarning, match=r"Chunk_1\.zip.*downloaded again"):
         frame = fetch_comma2k19(
-            data_home=tmp_path, base_url=folder.as_uri(), checksums={"Chunk_1.zip": digest}
+            data_home=tmp_path,
+            base_url=folder.as_uri(),
+            method="archive",
+            checksums={"Chunk_1.zip": digest},
         )
     assert frame["recording"].nunique() == 2
     assert (cache / "Chunk_1.zip").read_bytes() == (folder / "Chunk_1.zip").read_bytes()
@@ -489,12 +479,13 @@ def test_network_errors_name_the_url(mirror, tmp_path):
     with pytest.raises(OSError, match=re.escape(repr(url + "Chunk_1.zip"))):
         fetch_comma2k19(data_home=tmp_path, base_url=url, checksums={})
     with pytest.raises(OSError, match=re.escape(repr(url + "SHA256SUMS"))):
-        fetch_comma2k19(data_home=tmp_path, base_url=url)
+        fetch_comma2k19(data_home=tmp_path, base_url=url, method="archive")
     with _serving(mirror[0], _FailingHandler) as url:
         with pytest.raises(OSError, match=re.escape(repr(url + "SHA256SUMS")) + ".*503"):
-            fetch_comma2k19(data_home=tmp_path, base_url=url)
-        with pytest.raises(OSError, match=re.escape(repr(url + "Chunk_1.zip")) + ".*503"):
-            fetch_comma2k19(data_home=tmp_path, base_url=url, checksums={})
+            fetch_comma2k19(data_home=tmp_path, base_url=url, method="archive")
+        for method in ("range", "archive"):
+            with pytest.raises(OSError, match=re.escape(repr(url + "Chunk_1.zip")) + ".*503"):
+                fetch_comma2k19(data_home=tmp_path, base_url=url, method=method, checksums={})
     with (
         _serving(mirror[0], _SlowHandler) as url,
         pytest.raises(OSError, match=re.escape(repr(url + "Chunk_1.zip")) + ".*timed out"),

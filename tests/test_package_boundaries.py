@@ -216,7 +216,8 @@ def test_the_oldest_constraints_are_the_lower_bounds_pyproject_claims():
     project = tomllib.loads((root / "pyproject.toml").read_text())["project"]
     claimed = {}
     for requirement in project["dependencies"] + project["optional-dependencies"]["test"]:
-        match = re.fullmatch(r"([A-Za-z0-9_-]+)(\[[^\]]*\])?>=([0-9.]+)", requirement)
+        # an environment marker may follow (opendbc supports Python < 3.13 only)
+        match = re.fullmatch(r"([A-Za-z0-9_-]+)(\[[^\]]*\])?>=([0-9.]+)(; .+)?", requirement)
         assert match, f"unexpected requirement {requirement!r}: give it a lower bound"
         claimed[match[1].lower()] = match[3]
     pinned = {}
@@ -231,3 +232,25 @@ def test_the_oldest_constraints_are_the_lower_bounds_pyproject_claims():
         assert _version_tuple(pinned[name]) == _version_tuple(claimed[name]), (
             f"{name}: pyproject.toml claims >={claimed[name]}, CI tests {pinned[name]}"
         )
+
+
+def test_the_test_extra_holds_the_can_extra():
+    """CI installs ``[test]``: the comma2k19 loader's DBC decoding runs there only if the
+    ``can`` extra is part of it, with the same bounds."""
+    import tomllib
+
+    extras = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"
+    ]
+    assert set(extras["can"]) <= set(extras["test"])
+
+
+def test_the_test_extra_holds_the_fetch_extra():
+    """CI installs ``[test]``: the range reads of comma2k19 are tested only if the ``fetch``
+    extra is part of it, with the same bounds."""
+    import tomllib
+
+    extras = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"
+    ]
+    assert set(extras["fetch"]) <= set(extras["test"])

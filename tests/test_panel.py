@@ -1,5 +1,7 @@
 """Recordings in the index (the panel form): reading ids, time and the filter's row order."""
 
+import warnings
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -72,3 +74,123 @@ def test_missing_recording_id_in_the_index_is_named():
     X = panel(["a", None, "b"], [0.0, 1.0, 0.0])
     with pytest.raises(ValueError, match="missing recording id.*row 1"):
         read_row_order(X)
+
+
+# --------------------------------------------------------------------------------------------
+# The estimator reads the panel form
+# --------------------------------------------------------------------------------------------
+
+from sklearn.model_selection import GroupKFold  # noqa: E402
+
+from skhmmgmr import ExhaustiveFeatureSelector, HMMGMRRegressor, PerformanceScore  # noqa: E402
+from skhmmgmr.datasets import make_lane_keeping, to_panel  # noqa: E402
+
+FEATURES = ["steering_wheel_angle", "yaw_rate"]
+
+
+@pytest.fixture(scope="module")
+def drives():
+    frames = [
+        make_lane_keeping(
+            12.0, setting=1 + i, sampling_rate=20.0, random_state=i, recording=f"r{i}"
+        )
+        for i in range(4)
+    ]
+    frame = pd.concat(frames, ignore_index=True)
+    model = HMMGMRRegressor(n_states=2, random_state=0)
+    model.fit(frame[FEATURES], frame["driver_torque"], groups=frame["recording"])
+    return frame, to_panel(frame), model
+
+
+def test_fit_on_the_panel_equals_fit_with_groups(drives):
+    frame, panel_frame, model = drives
+    on_panel = HMMGMRRegressor(n_states=2, random_state=0)
+    on_panel.fit(panel_frame[FEATURES], panel_frame["driver_torque"])
+    assert np.allclose(on_panel.means_, model.means_, rtol=0, atol=1e-10)
+    assert on_panel.longest_recording_ == model.longest_recording_ == 240
+
+
+def test_shuffled_panel_predicts_every_row_as_the_grouped_call_does(drives):
+    frame, panel_frame, model = drives
+    expected, expected_std = model.predict(
+        frame[FEATURES], groups=frame["recording"], return_std=True
+    )
+    expected_alpha = model.predict_state_proba(frame[FEATURES], groups=frame["recording"])
+    shuffle = np.random.default_rng(0).permutation(len(panel_frame))
+    shuffled = panel_frame.iloc[shuffle]
+    y_pred, y_std = model.predict(shuffled[FEATURES], return_std=True)
+    assert np.allclose(y_pred, expected[shuffle], rtol=0, atol=1e-12)
+    assert np.allclose(y_std, expected_std[shuffle], rtol=0, atol=1e-12)
+    alpha = model.predict_state_proba(shuffled[FEATURES])
+    assert np.allclose(alpha, expected_alpha[shuffle], rtol=0, atol=1e-12)
+    grouped_ll = model.log_likelihood(
+        frame[FEATURES], frame["driver_torque"], groups=frame["recording"]
+    )
+    panel_ll = model.log_likelihood(shuffled[FEATURES], shuffled["driver_torque"])
+    assert panel_ll == pytest.approx(grouped_ll, rel=1e-12)
+
+
+def test_groups_given_with_a_panel_must_agree(drives):
+    _, panel_frame, model = drives
+    wrong = np.where(panel_frame.index.get_level_values("recording") == "r1", "r2", "r1")
+    with pytest.raises(ValueError, match="groups disagrees with the recording level"):
+        model.predict(panel_frame[FEATURES], groups=wrong)
+
+
+def test_many_ungrouped_rows_warn_that_they_are_one_recording(drives):
+    frame, _, model = drives
+    with pytest.warns(UserWarning, match="filtered as ONE recording.*longest training"):
+        model.predict(frame[FEATURES])
+    with pytest.warns(UserWarning, match="filtered as ONE recording.*longest training"):
+        model.log_likelihood(frame[FEATURES], frame["driver_torque"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model.predict(frame[FEATURES].iloc[:240])
+        model.predict(frame[FEATURES], groups=frame["recording"])
+
+
+def test_filter_stream_restarts_at_every_recording_of_an_indexed_batch(drives):
+    frame, panel_frame, model = drives
+    expected = model.predict(frame[FEATURES], groups=frame["recording"])
+    shuffle = np.random.default_rng(1).permutation(len(panel_frame))
+    stream = model.filter_stream()
+    estimates = stream.update_batch(panel_frame[FEATURES].iloc[shuffle])
+    assert np.allclose(estimates, expected[shuffle], rtol=0, atol=1e-12)
+    # in two batches cut inside a recording: the second goes on with the same recording
+    stream.reset()
+    first = stream.update_batch(panel_frame[FEATURES].iloc[:300])
+    assert stream.recording_ == "r1"
+    second = stream.update_batch(panel_frame[FEATURES].iloc[300:])
+    assert np.allclose(np.concatenate([first, second]), expected, rtol=0, atol=1e-12)
+
+
+def test_scorers_read_recordings_and_time_from_a_shuffled_panel(drives):
+    frame, panel_frame, model = drives
+    grouped = PerformanceScore(sampling_period=0.05)(
+        model, frame[FEATURES], frame["driver_torque"], groups=frame["recording"]
+    )
+    shuffle = np.random.default_rng(2).permutation(len(panel_frame))
+    shuffled = panel_frame.iloc[shuffle]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no UngroupedScoringWarning
+        on_panel = PerformanceScore(sampling_period=0.05)(
+            model, shuffled[FEATURES], shuffled["driver_torque"]
+        )
+        # the time step from the index's time level when no sampling_period is given
+        from_index_time = PerformanceScore()(model, shuffled[FEATURES], shuffled["driver_torque"])
+    assert on_panel == pytest.approx(grouped, rel=1e-12)
+    assert from_index_time == pytest.approx(grouped, rel=1e-9)
+
+
+def test_a_selector_fitted_on_the_panel_equals_one_fitted_with_groups(drives):
+    frame, panel_frame, _ = drives
+    features = [*FEATURES, "heading_deviation_10m"]
+    cv = GroupKFold(2)
+    grouped = ExhaustiveFeatureSelector(cv=cv, sampling_period=0.05, max_features=2)
+    grouped.fit(frame[features], frame["driver_torque"], groups=frame["recording"])
+    shuffle = np.random.default_rng(3).permutation(len(panel_frame))
+    shuffled = panel_frame.iloc[shuffle]
+    on_panel = ExhaustiveFeatureSelector(cv=cv, sampling_period=0.05, max_features=2)
+    on_panel.fit(shuffled[features], shuffled["driver_torque"])
+    pd.testing.assert_frame_equal(on_panel.results_, grouped.results_)
+    assert list(on_panel.get_feature_names_out()) == list(grouped.get_feature_names_out())

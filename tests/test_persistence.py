@@ -47,6 +47,7 @@ def test_init_stores_parameters_verbatim():
         "n_init": 2,
         "init_params": "kmeans",
         "reg_covar": 1e-3,
+        "missing_values": "error",
         "random_state": 4,
         "verbose": 0,
     }

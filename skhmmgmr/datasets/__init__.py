@@ -4,10 +4,12 @@ from .._panel import to_panel
 from ._base import clear_data_home, get_data_home
 from ._calibration import CALIBRATION_BANDS, THESIS_TABLE_C2, calibration_table
 from ._comma2k19 import load_comma2k19_segment
+from ._comma2k19_scan import scan_comma2k19
 from ._driver import DRIVER_STYLES, DriverParameters
 from ._fetch import COMMA2K19_URL, fetch_comma2k19
 from ._protocol import make_driving_protocol
 from ._recordings import load_recordings
+from ._resample import resample_recordings
 from ._schema import (
     DRIVER,
     FEATURE_NAMES,
@@ -34,6 +36,8 @@ __all__ = [
     "get_data_home",
     "load_comma2k19_segment",
     "load_recordings",
+    "resample_recordings",
+    "scan_comma2k19",
     "to_panel",
     "DRIVER",
     "FEATURE_NAMES",

@@ -3,50 +3,49 @@
 comma2k19 (comma.ai, MIT licence) is 33 hours of highway commute split into one-minute
 segments. Segments of chunks 1 and 2 come from a Toyota RAV4, whose CAN bus carries the
 driver's torque on the steering wheel; this module decodes it, together with the steering and
-vehicle-motion signals, with the Toyota DBC definitions.
+vehicle-motion signals and, on request, the signals that tell who steers (openpilot or the
+driver), with openpilot's Toyota DBC (:mod:`._comma2k19_can`); it puts them on a uniform time
+grid and can keep the spans the driver steers alone, each as a recording of its own.
 """
 
+import math
 import numbers
 import re
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 from scipy.signal import savgol_filter
 
+from ._comma2k19_can import can_decoder
 from ._frame import tidy_frame
 from ._schema import DRIVER, RECORDING, TARGET, TIME
 
 BUS = 0
+# The panda marks the frames the comma device sent (openpilot's commands) with bit 7 of the bus.
+SENT = 128
 DRIVER_NAME = "comma2k19"
 TORQUE_UNIT = "raw sensor units"
+FLAG_UNIT = "flag (0 or 1)"
 _SMOOTHING_SECONDS = 0.25
 # Grids faster than this only interpolate: the CAN messages decoded come at 50 to 83 Hz.
 MAX_SAMPLING_RATE = 1000.0
+STEERING = ("all", "driver")
 
-
-class CANSignal(NamedTuple):
-    """A signal of a CAN message, as a DBC file defines it (big-endian bit order)."""
-
-    address: int
-    start_bit: int
-    length: int
-    signed: bool
-    scale: float
-    offset: float
-
-
-# Toyota DBC definitions (openpilot's toyota_*_pt). STEER_FRACTION, the 0.1 deg complement of
-# STEER_ANGLE, is needed: the processed CAN/steering_angle of comma2k19 is exactly their sum.
-STEER_TORQUE_DRIVER = CANSignal(0x260, 15, 16, True, 1.0, 0.0)
-STEER_TORQUE_EPS = CANSignal(0x260, 47, 16, True, 1.0, 0.0)
-YAW_RATE = CANSignal(0x24, 1, 10, False, 0.244, -125.0)
-ACCEL_Y = CANSignal(0x24, 33, 10, False, 0.03589, -18.375)
-STEER_ANGLE = CANSignal(0x25, 3, 12, True, 1.5, 0.0)
-STEER_FRACTION = CANSignal(0x25, 39, 4, True, 0.1, 0.0)
-STEER_RATE = CANSignal(0x25, 35, 12, True, 1.0, 0.0)
-
-_MESSAGE_NAMES = {0x260: "STEER_TORQUE_SENSOR", 0x24: "KINEMATICS", 0x25: "STEER_ANGLE_SENSOR"}
+# Messages read on bus 0, the car's bus, where the EPS, brake and engine ECUs send them.
+_STEERING_MESSAGES = ("STEER_TORQUE_SENSOR", "KINEMATICS", "STEER_ANGLE_SENSOR")
+_ENGAGEMENT_MESSAGES = ("EPS_STATUS", "PCM_CRUISE", "BRAKE_MODULE")
+# openpilot's steering command, sent by the comma device; absent when openpilot did not run.
+_COMMAND = "STEERING_LKA"
+# Engagement column -> (message, signal, unit), held from the last frame at or before a grid time.
+ENGAGEMENT = {
+    "cruise_active": ("PCM_CRUISE", "CRUISE_ACTIVE", FLAG_UNIT),
+    "openpilot_steer_request": (_COMMAND, "STEER_REQUEST", FLAG_UNIT),
+    "openpilot_steer_command": (_COMMAND, "STEER_TORQUE_CMD", "raw command units"),
+    "eps_lka_active": ("EPS_STATUS", "LKA_STATE", FLAG_UNIT),
+    "steer_override": ("STEER_TORQUE_SENSOR", "STEER_OVERRIDE", FLAG_UNIT),
+    "brake_pressed": ("BRAKE_MODULE", "BRAKE_PRESSED", FLAG_UNIT),
+    "gas_pressed": ("PCM_CRUISE", "GAS_RELEASED", FLAG_UNIT),
+}
 _RAW_CAN = ("processed_log", "CAN", "raw_can")
 _SPEED = ("processed_log", "CAN", "speed")
 _REQUIRED_FILES = tuple(Path(*_RAW_CAN, name) for name in ("t", "address", "src", "data")) + (
@@ -57,74 +56,6 @@ _REQUIRED_FILES = tuple(Path(*_RAW_CAN, name) for name in ("t", "address", "src"
 ROUTE_PATTERN = re.compile(
     r"^(?P<dongle>[0-9a-f]{16})(?:\||_|--)(?P<start>\d{4}-\d\d-\d\d--\d\d-\d\d-\d\d)$"
 )
-
-
-def decode_big_endian_signal(data, start_bit, length, *, signed=False, scale=1.0, offset=0.0):
-    """Decode a big-endian ("Motorola") signal from CAN payloads, for many frames at once.
-
-    Parameters
-    ----------
-    data : array-like of bytes of shape (n_frames,)
-        Payloads of at most 8 bytes (a NumPy ``|S8`` array, or a list of ``bytes``); shorter
-        payloads are padded with zero bytes. A ``uint8`` array of shape (n_frames, 8) works too.
-    start_bit : int
-        Position of the most significant bit of the signal, numbered as a DBC file writes it:
-        bit ``8 * k + j`` is bit ``j`` (0 = least significant) of byte ``k``.
-    length : int
-        Number of bits, 1 to 63.
-    signed : bool, default=False
-        Whether the raw value is two's complement.
-    scale, offset : float, default=1.0, 0.0
-        Physical value = raw value * scale + offset.
-
-    Returns
-    -------
-    values : ndarray of shape (n_frames,)
-        The physical values, as floats.
-
-    Examples
-    --------
-    >>> decode_big_endian_signal([b"\\x00\\xff\\xfe"], start_bit=15, length=16, signed=True)
-    array([-2.])
-    """
-    payload = np.asarray(data)
-    if not (payload.dtype == np.uint8 and payload.ndim == 2 and payload.shape[1] == 8):
-        if payload.dtype.kind == "O":
-            payload = payload.astype("S")
-        if payload.dtype.kind != "S" or payload.dtype.itemsize > 8:
-            raise ValueError(
-                "CAN payloads must be byte strings of at most 8 bytes or uint8 rows of 8 bytes, "
-                f"got an array of dtype {payload.dtype}."
-            )
-        payload = np.frombuffer(payload.astype("S8").tobytes(), dtype=np.uint8).reshape(-1, 8)
-    if not 0 <= start_bit < 64 or not 1 <= length < 64:
-        raise ValueError(f"Invalid signal: start bit {start_bit}, length {length}.")
-    # Byte 0 first makes the payload one big-endian integer, in which the bits of a Motorola
-    # signal are contiguous.
-    words = np.ascontiguousarray(payload).view(">u8").ravel().astype(np.uint64)
-    msb = 8 * (7 - start_bit // 8) + start_bit % 8
-    lsb = msb - length + 1
-    if lsb < 0:
-        raise ValueError(
-            f"A {length}-bit signal starting at bit {start_bit} does not fit in 8 bytes."
-        )
-    raw = ((words >> np.uint64(lsb)) & np.uint64((1 << length) - 1)).astype(np.int64)
-    if signed:
-        raw = np.where(raw >= 1 << (length - 1), raw - (1 << length), raw)
-    return raw * float(scale) + float(offset)
-
-
-def _decode(frames, signal):
-    times, data = frames[signal.address]
-    values = decode_big_endian_signal(
-        data,
-        signal.start_bit,
-        signal.length,
-        signed=signal.signed,
-        scale=signal.scale,
-        offset=signal.offset,
-    )
-    return times, values
 
 
 def _segment_name(path):
@@ -212,7 +143,9 @@ class _Segment:
         return times
 
 
-def _read_frames(segment):
+def _read_frames(segment, decoder, messages):
+    """The decoded signals of ``messages``: message -> (times, {signal: values}), or None for an
+    openpilot command the segment does not have."""
     folder = "/".join(_RAW_CAN)
     times = segment.times(f"{folder}/t", monotonic=False)
     length_of = f"{folder}/t", times
@@ -222,29 +155,63 @@ def _read_frames(segment):
     if data.dtype.itemsize > 8:
         segment.fail(f"{folder}/data", f"holds {data.dtype} values: CAN payloads have 8 bytes")
     frames = {}
-    for message, name in _MESSAGE_NAMES.items():
-        selected = np.flatnonzero((bus == BUS) & (address == message))
+    for name in messages:
+        message, on = decoder.frame_id(name), SENT if name == _COMMAND else BUS
+        selected = np.flatnonzero((bus == on) & (address == message))
+        if name == _COMMAND and not selected.size:
+            frames[name] = None
+            continue
         if selected.size < 2:
             raise ValueError(
                 f"The segment {segment.path} has no {name} frames (CAN id {message:#x}) on bus "
-                f"{BUS}. Only the Toyota RAV4 segments of comma2k19 (chunks 1 and 2) can be "
+                f"{on}. Only the Toyota RAV4 segments of comma2k19 (chunks 1 and 2) can be "
                 "decoded."
             )
         # The frames of each message must be in time order (the whole file is, in comma2k19).
         of = f" of {name} frames (CAN id {message:#x})"
         segment.check_order(f"{folder}/t", times[selected], index=selected, of=of)
-        frames[message] = times[selected], data[selected]
+        frames[name] = times[selected], decoder.decode(name, data[selected])
     return frames
 
 
-def load_comma2k19_segment(path, *, sampling_rate=20.0, recording=None, eps_torque=False):
+def check_options(sampling_rate, *, engagement=False, steering="all", min_span=2.0):
+    """Check the options of :func:`load_comma2k19_segment` before any file is read; return the
+    sampling rate and the minimum span as floats.
+
+    Raises ImportError when they need openpilot's DBC and ``skhmmgmr[can]`` is not installed.
+    """
+    sampling_rate = check_sampling_rate(sampling_rate)
+    if not isinstance(steering, str) or steering not in STEERING:
+        raise ValueError(f"steering must be one of {STEERING}, got {steering!r}.")
+    if (
+        not isinstance(min_span, numbers.Real)
+        or isinstance(min_span, (bool, np.bool_))
+        or not 0 <= min_span < np.inf
+    ):
+        raise ValueError(f"min_span must be a number of seconds >= 0, got {min_span!r}.")
+    can_decoder(need_dbc=bool(engagement) or steering == "driver")
+    return sampling_rate, float(min_span)
+
+
+def load_comma2k19_segment(
+    path,
+    *,
+    sampling_rate=20.0,
+    recording=None,
+    eps_torque=False,
+    engagement=False,
+    steering="all",
+    min_span=2.0,
+):
     """Load the steering signals of one comma2k19 segment on a uniform time grid.
 
     The driver torque, steering angle and rate, yaw rate and lateral acceleration are decoded
     from the raw CAN frames of bus 0 (the car's bus, where all these messages are; the panda's
-    other buses do not carry them), with the Toyota DBC definitions. The speed is the processed
-    ``CAN/speed`` signal (mean of the four wheel speeds). Every signal is linearly interpolated
-    onto a uniform grid over the time span all of them cover, then converted to SI units.
+    other buses do not carry them), with openpilot's Toyota DBC file read by ``cantools`` when
+    the extra ``skhmmgmr[can]`` is installed, else with a built-in copy of its seven steering
+    signals: both give the same values. The speed is the processed ``CAN/speed`` signal (mean
+    of the four wheel speeds). Every signal is linearly interpolated onto a uniform grid over
+    the time span all of them cover, then converted to SI units.
 
     Angles, rates and accelerations follow ISO 8855: positive to the left (counter-clockwise
     seen from above). The torques keep the sensor's sign, which on the example segment goes
@@ -268,6 +235,19 @@ def load_comma2k19_segment(path, *, sampling_rate=20.0, recording=None, eps_torq
         Whether to add the torque measured by the power-steering motor (``eps_torque``, raw
         units). It results from the driver's torque and the assistance, so it is left out by
         default.
+    engagement : bool, default=False
+        Whether to add the columns that tell who steers (see Notes), decoded with openpilot's
+        DBC: needs ``skhmmgmr[can]``.
+    steering : {"all", "driver"}, default="all"
+        ``"driver"`` keeps only the rows where the driver steers alone: openpilot requests no
+        steering torque and the power steering applies none (``openpilot_steer_request`` and
+        ``eps_lka_active`` both 0). Each run of such rows lasting at least ``min_span`` becomes
+        a recording of its own, ``"<recording>/span<k>"`` (k = 0, 1, ... in time order), so
+        that no filter runs across a removed span; a segment without one gives a frame without
+        rows. Needs ``skhmmgmr[can]``.
+    min_span : float, default=2.0
+        Shortest span kept with ``steering="driver"``, in seconds; a span of n rows lasts
+        n / ``sampling_rate``.
 
     Returns
     -------
@@ -275,34 +255,66 @@ def load_comma2k19_segment(path, *, sampling_rate=20.0, recording=None, eps_torq
         One row per grid time: meta columns ``recording``, ``driver`` (``"comma2k19"``),
         ``setting`` (NaN: the simulator's settings do not apply to a real car), ``split``
         (``"unknown"``: comma2k19 defines no train/test split), ``time`` (s, from the first
-        grid time); the features ``steering_wheel_angle`` [rad],
+        grid time of the recording); the features ``steering_wheel_angle`` [rad],
         ``steering_wheel_velocity`` [rad/s], ``steering_wheel_acceleration`` [rad/s^2],
         ``lateral_acceleration`` [m/s^2], ``yaw_rate`` [rad/s], ``yaw_acceleration``
-        [rad/s^2], ``speed`` [m/s] (and ``eps_torque``); last the target ``driver_torque``
-        in **raw sensor units, not Nm** (openpilot takes more than 100 units for "the driver
-        is steering"). ``attrs["units"]`` gives every unit; ``attrs["time_origin"]`` maps
-        the recording id to the device boot time [s] of its first row, the clock of the other
-        files of the segment.
+        [rad/s^2], ``speed`` [m/s] (then ``eps_torque`` and the engagement columns, if
+        asked); last the target ``driver_torque`` in **raw sensor units, not Nm** (openpilot
+        takes more than 100 units for "the driver is steering"). ``attrs["units"]`` gives
+        every unit; ``attrs["time_origin"]`` maps each recording id to the device boot time
+        [s] of its first row, the clock of the other files of the segment.
 
     Raises
     ------
     FileNotFoundError
         When the folder or one of the files read is missing.
+    ImportError
+        When ``engagement`` or ``steering="driver"`` is asked without ``skhmmgmr[can]``.
     ValueError
         Naming the file and the segment, when a file is not a readable NumPy array, has the
         wrong type, shape or length, or holds times that are not finite or go back (they are
-        never re-sorted); also when the segment has no Toyota steering frames, or
-        ``sampling_rate`` is out of range.
+        never re-sorted); also when the segment has no Toyota steering frames (or, for the
+        engagement columns, no EPS_STATUS, PCM_CRUISE or BRAKE_MODULE frames), or an option
+        is out of range.
 
     Notes
     -----
     The two accelerations are derivatives of the steering rate and yaw rate after a
-    Savitzky-Golay smoothing over 0.25 s. The lateral acceleration and yaw rate are the car's
-    own inertial sensor: uncalibrated, the yaw rate can be offset by a few tenths of a degree
-    per second, and the lateral acceleration includes gravity on a banked road. The lateral
-    velocity and slip angle are not given: they cannot be measured with these sensors, only
-    estimated with a vehicle model. The vehicle is a 2017 RAV4 (wheelbase 2.65 m, steering
-    ratio 16.88).
+    Savitzky-Golay smoothing over 0.25 s, computed on the whole segment before any span is
+    cut out. The lateral acceleration and yaw rate are the car's own inertial sensor:
+    uncalibrated, the yaw rate can be offset by a few tenths of a degree per second, and the
+    lateral acceleration includes gravity on a banked road. The lateral velocity and slip angle
+    are not given: they cannot be measured with these sensors, only estimated with a vehicle
+    model. The vehicle is a 2017 RAV4 (wheelbase 2.65 m, steering ratio 16.88).
+
+    The engagement columns (DBC message.signal; flags are 0.0 or 1.0) hold, at each grid time,
+    the value of the last frame at or before it (the first frame's value before it):
+
+    - ``cruise_active``: PCM_CRUISE.CRUISE_ACTIVE, the car's adaptive cruise control is
+      engaged; on a Toyota, openpilot is engaged exactly then.
+    - ``openpilot_steer_request``: STEERING_LKA.STEER_REQUEST, openpilot asks the power
+      steering to apply its torque command; read from the frames the comma device sent
+      (bus 128 of the log); 0 throughout when the segment has none.
+    - ``openpilot_steer_command``: STEERING_LKA.STEER_TORQUE_CMD, that command, in the raw
+      units of the power steering (0 when there is no frame).
+    - ``eps_lka_active``: EPS_STATUS.LKA_STATE is "active", the power steering applies the
+      lane-keeping torque (else "standby", or a fault).
+    - ``steer_override``: STEER_TORQUE_SENSOR.STEER_OVERRIDE, the power steering's own flag
+      "driver torque above a threshold". openpilot's "steering pressed" is instead
+      ``abs(driver_torque) > 100``.
+    - ``brake_pressed``: BRAKE_MODULE.BRAKE_PRESSED, the driver presses the brake pedal.
+    - ``gas_pressed``: PCM_CRUISE.GAS_RELEASED is 0, the driver presses the accelerator (as
+      openpilot reads it).
+
+    A driver overriding openpilot (``steer_override`` set while ``eps_lka_active``) does not
+    count as steering alone for ``steering="driver"``: openpilot's torque still acts then.
+
+    The DBC file is ``toyota_new_mc_pt_generated``, the one openpilot uses for the 2017-18
+    RAV4, as generated by the ``opendbc`` package (https://github.com/commaai/opendbc, MIT
+    licence, Copyright (c) 2020, Comma.ai, Inc.; 0.3.1 is its first release with the Toyota
+    files, for Python 3.11 and 3.12). It is read with ``cantools``. Without the extra
+    ``skhmmgmr[can]``, the seven steering signals are decoded with a built-in copy of their
+    definitions; the engagement options then raise an ImportError.
 
     Examples
     --------
@@ -312,7 +324,10 @@ def load_comma2k19_segment(path, *, sampling_rate=20.0, recording=None, eps_torq
     >>> df.attrs["units"]["driver_torque"]  # doctest: +SKIP
     'raw sensor units'
     """
-    sampling_rate = check_sampling_rate(sampling_rate)
+    sampling_rate, min_span = check_options(
+        sampling_rate, engagement=engagement, steering=steering, min_span=min_span
+    )
+    need_dbc = bool(engagement) or steering == "driver"
     path = Path(path)
     if not path.is_dir():
         raise FileNotFoundError(f"No comma2k19 segment folder at {str(path)!r}.")
@@ -324,17 +339,23 @@ def load_comma2k19_segment(path, *, sampling_rate=20.0, recording=None, eps_torq
     recording = _segment_name(path.resolve()) if recording is None else str(recording)
 
     segment = _Segment(path)
-    frames = _read_frames(segment)
+    decoder = can_decoder(need_dbc=need_dbc)
+    messages = _STEERING_MESSAGES
+    if need_dbc:
+        messages += (*_ENGAGEMENT_MESSAGES, _COMMAND)
+    frames = _read_frames(segment, decoder, messages)
     signals = {
-        "steering_wheel_angle": _sum(_decode(frames, STEER_ANGLE), _decode(frames, STEER_FRACTION)),
-        "steering_wheel_velocity": _decode(frames, STEER_RATE),
-        "yaw_rate": _decode(frames, YAW_RATE),
-        "lateral_acceleration": _decode(frames, ACCEL_Y),
+        "steering_wheel_angle": _signal(
+            frames, "STEER_ANGLE_SENSOR", "STEER_ANGLE", "STEER_FRACTION"
+        ),
+        "steering_wheel_velocity": _signal(frames, "STEER_ANGLE_SENSOR", "STEER_RATE"),
+        "yaw_rate": _signal(frames, "KINEMATICS", "YAW_RATE"),
+        "lateral_acceleration": _signal(frames, "KINEMATICS", "ACCEL_Y"),
         "speed": _read_signal(segment, _SPEED),
-        TARGET: _decode(frames, STEER_TORQUE_DRIVER),
+        TARGET: _signal(frames, "STEER_TORQUE_SENSOR", "STEER_TORQUE_DRIVER"),
     }
     if eps_torque:
-        signals["eps_torque"] = _decode(frames, STEER_TORQUE_EPS)
+        signals["eps_torque"] = _signal(frames, "STEER_TORQUE_SENSOR", "STEER_TORQUE_EPS")
 
     start = max(t[0] for t, _ in signals.values())
     stop = min(t[-1] for t, _ in signals.values())
@@ -366,18 +387,57 @@ def load_comma2k19_segment(path, *, sampling_rate=20.0, recording=None, eps_torq
     columns["speed"] = on_grid["speed"]
     if eps_torque:
         columns["eps_torque"] = on_grid["eps_torque"]
+    flags = _engagement(frames, decoder, grid) if need_dbc else {}
+    if engagement:
+        columns.update(flags)
     columns[TARGET] = on_grid[TARGET]
+    origins = {recording: float(start)}
+    if steering == "driver":
+        alone = (flags["openpilot_steer_request"] == 0) & (flags["eps_lka_active"] == 0)
+        min_rows = max(1, math.ceil(min_span * sampling_rate - 1e-9))
+        columns, origins = _driver_spans(columns, alone, grid, sampling_rate, min_rows)
     # setting and split keep the defaults (NaN, "unknown"): comma2k19 defines neither.
-    return tidy_frame(
-        columns,
-        units={"speed": "m/s", "eps_torque": TORQUE_UNIT, TARGET: TORQUE_UNIT},
-        attrs={"time_origin": {recording: float(start)}},
-    )
+    units = {"speed": "m/s", "eps_torque": TORQUE_UNIT, TARGET: TORQUE_UNIT}
+    units.update({name: unit for name, (_, _, unit) in ENGAGEMENT.items()})
+    return tidy_frame(columns, units=units, attrs={"time_origin": origins})
 
 
-def _sum(first, second):
-    (times, a), (_, b) = first, second
-    return times, a + b
+def _signal(frames, message, *names):
+    """(times, values) of the sum of the signals ``names`` of ``message``."""
+    times, decoded = frames[message]
+    values = decoded[names[0]]
+    for name in names[1:]:
+        values = values + decoded[name]
+    return times, values
+
+
+def _engagement(frames, decoder, grid):
+    """The engagement columns on the grid, each held from the last frame at or before."""
+    flags = {}
+    for column, (message, signal, _) in ENGAGEMENT.items():
+        if frames[message] is None:  # openpilot sent no steering command in this segment
+            flags[column] = np.zeros(len(grid))
+            continue
+        times, decoded = frames[message]
+        last = np.maximum(np.searchsorted(times, grid, side="right") - 1, 0)
+        flags[column] = decoded[signal][last]
+    active = decoder.choice("EPS_STATUS", "LKA_STATE", "active")
+    flags["eps_lka_active"] = (flags["eps_lka_active"] == active).astype(float)
+    flags["gas_pressed"] = (flags["gas_pressed"] == 0).astype(float)
+    return flags
+
+
+def _driver_spans(columns, alone, grid, sampling_rate, min_rows):
+    """Keep the runs of at least ``min_rows`` rows where ``alone``, each a recording of its own,
+    its time from 0; return the columns and the boot time of each recording's first row."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], alone.astype(np.int8), [0]))))
+    spans = [(a, b) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a >= min_rows]
+    names = [f"{columns[RECORDING]}/span{k}" for k in range(len(spans))]
+    rows = np.concatenate([np.arange(a, b) for a, b in spans] or [np.zeros(0, dtype=int)])
+    kept = {name: v if np.ndim(v) == 0 else np.asarray(v)[rows] for name, v in columns.items()}
+    kept[RECORDING] = np.repeat(np.array(names, dtype=object), [b - a for a, b in spans])
+    kept[TIME] = np.concatenate([np.arange(b - a) / sampling_rate for a, b in spans] or [[]])
+    return kept, {n: float(grid[a]) for n, (a, _) in zip(names, spans, strict=True)}
 
 
 def _read_signal(segment, parts):

@@ -4,7 +4,8 @@ Every loader hands its columns to :func:`tidy_frame`, which puts them in the ord
 the schema (:mod:`._schema`) and refuses what the estimators would otherwise get silently wrong:
 missing ids, non-finite values, recordings whose rows are scattered or whose times do not
 strictly increase. :func:`time_order` puts rows in the order :func:`tidy_frame` requires;
-:func:`concat_frames` joins tidy frames of distinct recordings.
+:func:`concat_frames` joins tidy frames of distinct recordings; :func:`check_times` and
+:func:`check_rate` lend the same checks to tools that take a frame (resampling).
 """
 
 import numpy as np
@@ -140,6 +141,73 @@ def time_order(recording, time=None):
         return np.argsort(codes, kind="stable")
     # lexsort is stable; its last key is the primary one
     return np.lexsort((np.asarray(time, dtype=float), codes))
+
+
+def check_rate(sampling_rate, *, optional=False):
+    """Refuse a sampling rate that is not a positive, finite number of Hz (a bool included).
+
+    Parameters
+    ----------
+    sampling_rate : float
+        The rate to check [Hz].
+    optional : bool, default=False
+        Whether None is accepted.
+
+    Raises
+    ------
+    ValueError
+        Naming the rate given.
+    """
+    if optional and sampling_rate is None:
+        return
+    if (
+        isinstance(sampling_rate, bool)
+        or not isinstance(sampling_rate, (int, float, np.number))
+        or not np.isfinite(sampling_rate)
+        or sampling_rate <= 0
+    ):
+        either = "None or " if optional else ""
+        raise ValueError(
+            f"sampling_rate must be {either}a positive number of Hz, got {sampling_rate!r}."
+        )
+
+
+def check_times(recording, time, *, names=(RECORDING, TIME)):
+    """Run :func:`tidy_frame`'s checks of the recording ids and times alone.
+
+    Parameters
+    ----------
+    recording : array-like of shape (n_rows,)
+        The recording id of every row.
+    time : array-like of shape (n_rows,)
+        The time of every row [s].
+    names : tuple of (str, str), default=("recording", "time")
+        Names of the two columns in error messages.
+
+    Returns
+    -------
+    recording : pandas.api.extensions.ExtensionArray of str
+        The ids as text, as in the tidy frame.
+    codes : ndarray of int of shape (n_rows,)
+        The recordings numbered in order of first appearance.
+    time : ndarray of float of shape (n_rows,)
+        The times.
+
+    Raises
+    ------
+    ValueError
+        Naming the recording and the first offending row (its position, from 0) and time, when
+        an id is missing, a time is NaN or infinite or not numeric, the rows of a recording
+        are not contiguous, or its times do not strictly increase.
+    """
+    recording = _values(recording, None)
+    time = _floats(names[1], time, len(recording))
+    rows = _Rows(len(recording), None, None, time)
+    recording = rows.recording = rows.text(names[0], recording)
+    rows.check_finite({names[1]: time})
+    codes = rows.check_contiguous()
+    rows.check_time(codes, None)
+    return recording, codes, time
 
 
 def concat_frames(frames, *, attrs=None):

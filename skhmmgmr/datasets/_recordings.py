@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ._frame import META_DEFAULTS, tidy_frame, time_order
+from ._frame import META_DEFAULTS, check_rate, tidy_frame, time_order
+from ._resample import check_max_gap, resample_recordings
 from ._schema import DRIVER, RECORDING, SETTING, SPLIT, TARGET, TIME
 
 _CSV_SUFFIXES = (".csv", ".csv.gz", ".csv.bz2", ".csv.zip", ".csv.xz")
@@ -188,6 +189,7 @@ def load_recordings(
     target=TARGET,
     features=None,
     sampling_rate=None,
+    max_gap=None,
     units=None,
 ):
     """Load driving recordings from CSV or Parquet files, or a DataFrame, into the tidy frame.
@@ -216,8 +218,16 @@ def load_recordings(
         Feature columns, in this order. By default every other column, which must then be
         numeric.
     sampling_rate : float, default=None
-        If given, check that every recording is sampled at this rate (steps within 1 % of
-        ``1 / sampling_rate``); recordings are never resampled.
+        If given without ``max_gap``, check that every recording is sampled at this rate
+        (steps within 1 % of ``1 / sampling_rate``); recordings are then never resampled. With
+        ``max_gap``, the rate of the grid the recordings are resampled to.
+    max_gap : float, default=None
+        If given, put every recording on a uniform grid at ``sampling_rate`` with
+        :func:`resample_recordings`: gaps up to ``max_gap`` seconds between samples are
+        interpolated, a longer gap splits its recording into ``"<id>/0"``, ``"<id>/1"``...
+        Features that are integer or boolean in their source (flags, gears, counters) take the
+        value of the latest sample (previous-value hold), the others and the target are
+        interpolated linearly. By default recordings are not resampled.
     units : dict of str to str, default=None
         Units of the columns, by their name in the source, added to ``attrs["units"]``. The
         schema's columns default to their SI units, others to ``"unknown"``.
@@ -229,8 +239,9 @@ def load_recordings(
         ``driver_torque``; recording ids, drivers and splits are text (read as text from CSV
         files, so that ``"007"`` and ``"7"`` stay two recordings). Rows of a recording are
         contiguous and sorted by time; recordings come in the order they first appear. No row
-        is dropped. ``attrs["units"]`` maps the time, feature and target columns to their
-        units.
+        is dropped (with ``max_gap``, the rows are those of the grid, see
+        :func:`resample_recordings`). ``attrs["units"]`` maps the time, feature and target
+        columns to their units.
 
     Raises
     ------
@@ -239,8 +250,9 @@ def load_recordings(
         rows of its source) and time, when a file cannot be read (empty, no data row, not
         UTF-8, truncated, a row longer than the header), a column is missing, a value is NaN
         or infinite, a recording id, driver or split is empty, a time is repeated within a
-        recording, a recording is not sampled at ``sampling_rate``, or one recording id is in
-        two files.
+        recording, a recording is not sampled at ``sampling_rate`` (without ``max_gap``), or one
+        recording id is in two files. Also when ``max_gap`` is given without ``sampling_rate``
+        or is shorter than one period.
 
     Notes
     -----
@@ -260,18 +272,14 @@ def load_recordings(
     >>> list(df.columns)
     ['recording', 'driver', 'setting', 'split', 'time', 'steering_wheel_angle', 'driver_torque']
     """
-    if sampling_rate is not None and (
-        isinstance(sampling_rate, bool)
-        or not isinstance(sampling_rate, (int, float, np.number))
-        or not np.isfinite(sampling_rate)
-        or sampling_rate <= 0
-    ):
-        raise ValueError(
-            f"sampling_rate must be None or a positive number of Hz, got {sampling_rate!r}."
-        )
+    check_rate(sampling_rate, optional=True)
+    if max_gap is not None:
+        if sampling_rate is None:
+            raise ValueError("max_gap needs sampling_rate, the rate of the grid to resample to.")
+        check_max_gap(max_gap, sampling_rate)
     if isinstance(features, str):
         features = [features]
-    parts, feature_names, first = [], None, None
+    parts, feature_names, first, held = [], None, None, set()
     for description, frame, stem in _sources(data, recording):
         part, names = _select(
             description,
@@ -290,6 +298,8 @@ def load_recordings(
                 f"({feature_names}): pass features= to choose the common ones."
             )
         parts.append(part[[*part.columns[:5], *feature_names, TARGET, _SOURCE, _ROW]])
+        dtypes = {str(column): dtype for column, dtype in frame.dtypes.items()}
+        held.update(name for name in names if not pd.api.types.is_float_dtype(dtypes[name]))
     frame = pd.concat(parts, ignore_index=True) if len(parts) > 1 else parts[0]
 
     owners = frame.drop_duplicates([RECORDING, _SOURCE])
@@ -301,10 +311,13 @@ def load_recordings(
 
     frame = frame.iloc[time_order(frame[RECORDING], frame[TIME])].reset_index(drop=True)
     renamed = {time: TIME, target: TARGET}
-    return tidy_frame(
+    frame = tidy_frame(
         frame.drop(columns=[_SOURCE, _ROW]),
         units={renamed.get(name, name): unit for name, unit in (units or {}).items()},
-        sampling_rate=sampling_rate,
+        sampling_rate=sampling_rate if max_gap is None else None,
         source=frame[_SOURCE].to_numpy(),
         row=frame[_ROW].to_numpy(),
     )
+    if max_gap is None:
+        return frame
+    return resample_recordings(frame, sampling_rate, max_gap=max_gap, hold=sorted(held))
