@@ -53,7 +53,7 @@ from sklearn.utils import check_random_state
 from ._em_data import EStepData
 from ._em_init import initial_emissions
 from ._emissions import MomentStatistics, make_emissions
-from ._gaussian import MomentSums, NotPositiveDefiniteError, split_moments
+from ._gaussian import MomentSums, NotPositiveDefiniteError, one_blas_thread, split_moments
 from ._kernels import backward_posteriors, forward
 
 
@@ -215,9 +215,10 @@ class _Expectations:
 def e_step(engine, params):
     """Forward-backward over every recording, accumulating the sufficient statistics."""
     expectations, log_likelihood = _Expectations(engine, params), 0.0
-    for block, frames, alpha, scale, block_log_likelihood in _forward_blocks(engine, params):
-        log_likelihood += block_log_likelihood
-        expectations.add(block, frames, alpha, scale)
+    with one_blas_thread():
+        for block, frames, alpha, scale, block_log_likelihood in _forward_blocks(engine, params):
+            log_likelihood += block_log_likelihood
+            expectations.add(block, frames, alpha, scale)
     return expectations.statistics(log_likelihood)
 
 
@@ -243,7 +244,8 @@ def score_hmm(X, recordings, params):
 
 
 def _score(engine, params):
-    return float(sum(item[-1] for item in _forward_blocks(engine, params)))
+    with one_blas_thread():
+        return float(sum(item[-1] for item in _forward_blocks(engine, params)))
 
 
 def m_step(stats, previous, prior):
@@ -309,7 +311,8 @@ def baum_welch(X, recordings, params, *, n_iter, tol, reg_covar, callback=None, 
         )
 
     for n_done in range(1, n_iter + 1):
-        log_likelihood, stats = _e_step_unless(engine, params, converges)
+        with one_blas_thread():
+            log_likelihood, stats = _e_step_unless(engine, params, converges)
         converged = converges(log_likelihood)
         history.append(log_likelihood)
         objectives.append(objective_of(log_likelihood, params))

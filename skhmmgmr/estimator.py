@@ -10,6 +10,7 @@ from sklearn.metrics import r2_score
 from sklearn.utils import metadata_routing
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from ._adaptation import AdaptMixin
 from ._compat import Interval, StrOptions, _fit_context
 from ._em import fit_hmm, score_hmm
 from ._em_data import Columns
@@ -31,7 +32,7 @@ from ._validation import (
 )
 
 
-class HMMGMRRegressor(ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstimator):
+class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstimator):
     """Hidden Markov Model + Gaussian Mixture Regression (HMM-GMR) regressor.
 
     A fully connected hidden Markov model with one Gaussian per state (a full covariance per

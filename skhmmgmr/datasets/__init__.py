@@ -20,6 +20,7 @@ from ._schema import (
     TARGET,
     TIME,
 )
+from ._shift import shift_target
 from ._simulator import make_lane_keeping
 
 __all__ = [
@@ -38,6 +39,7 @@ __all__ = [
     "load_recordings",
     "resample_recordings",
     "scan_comma2k19",
+    "shift_target",
     "to_panel",
     "DRIVER",
     "FEATURE_NAMES",
