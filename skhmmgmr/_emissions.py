@@ -22,6 +22,7 @@ regression slope is shared and the intercepts differ by state). ``"diag"`` and `
 are refused (:data:`REFUSED_COVARIANCE_TYPES`).
 """
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
@@ -129,7 +130,7 @@ class GaussianDensity:
         return (self.norms - half).T
 
 
-class GaussianEmissions:
+class GaussianEmissions(ABC):
     """Gaussian state densities over ``n_dims`` columns; the base of both families.
 
     Parameters
@@ -175,26 +176,29 @@ class GaussianEmissions:
 
     # -- family-specific parts ---------------------------------------------------------------
     @staticmethod
+    @abstractmethod
     def covariance_shape(n_states, n_dims):
-        raise NotImplementedError
+        """Shape of the family's own covariance array."""
 
     @staticmethod
+    @abstractmethod
     def _expand(covariances, n_states):
-        raise NotImplementedError
+        """Every state's full covariance from the family's own array."""
 
     def _precisions_chol(self):
         return compute_precision_cholesky(self.full_covariances)
 
+    @abstractmethod
     def n_parameters(self):
         """Free parameters of the state densities (means and covariances)."""
-        raise NotImplementedError
 
     @classmethod
+    @abstractmethod
     def prior_for(cls, reg_covar, n_samples, n_states):
         """The covariance prior of ``reg_covar``: the scatter of ``n_samples`` divided over
         the covariance matrices (an average share) rows of variance ``reg_covar``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def maximize(self, statistics, prior):
         """M-step: the maximiser of the expected complete-data log-likelihood plus the log
         prior, from ``statistics`` (:class:`MomentStatistics`).
@@ -203,18 +207,17 @@ class GaussianEmissions:
         parameters (``self`` is the previous emission): its terms are then unchanged while
         the others are maximised (a generalised EM step).
         """
-        raise NotImplementedError
 
     @classmethod
+    @abstractmethod
     def from_moments(cls, statistics, reg_covar, pooled=None):
         """Initial emission from the moments of initial responsibilities, ``reg_covar`` on
         the diagonal; ``pooled`` (moments of all rows, one state) stands in for states with
         too few rows for a covariance."""
-        raise NotImplementedError
 
+    @abstractmethod
     def _with(self, means, full_covariances):
         """The same family over other means and (full) covariances."""
-        raise NotImplementedError
 
     # -- shared parts ------------------------------------------------------------------------
     def log_prior(self, prior):
