@@ -1,12 +1,20 @@
 """A fused reference for the EM engine's E-step: plain numba, written for clarity.
 
-One pass per recording does everything the engine splits into stages: the emission
-log-densities through the precision Cholesky factors, inline; the scaled forward recursion;
-the backward recursion, which accumulates the posteriors, the expected transitions and the
-weighted moments (about ``shift``) in place. Recordings run in parallel (``prange``), each
-into its own slot of the statistics, summed at the end. The M-step is the package's
-(:func:`skhmmgmr._em.m_step`): its cost is negligible, and the two log-likelihood histories
-then differ by round-off only (``tests/test_fused_reference.py``).
+One pass per recording does everything the engine splits into stages:
+
+1. forward: the emission log-densities of a row through the precision Cholesky factors,
+   inline; their exponentials relative to the row's largest; the forward recursion, every row
+   normalised to sum to one (``c_t``, the log-likelihood is ``sum_t log c_t`` plus the
+   largest log-densities);
+2. backward: the posteriors of a row, added to the weighted moments (about ``shift``) at
+   once; the terms of the expected transitions, added in place; the backward variable of
+   the previous row.
+
+Recordings run in parallel (``prange``) in a fixed number of groups of about equal rows, each
+group into its own accumulators, summed at the end in group order (the result does not
+depend on the number of threads). The M-step is the package's (:func:`skhmmgmr._em.m_step`):
+its cost is negligible, and the two log-likelihood histories then differ by round-off only
+(``tests/test_fused_reference.py``).
 """
 
 import numpy as np
@@ -15,33 +23,45 @@ from numba import njit, prange
 from skhmmgmr._em import HMMParameters, Statistics, m_step
 from skhmmgmr._emissions import MomentStatistics
 
+# exp() below this is subnormal or zero: the frame is set to zero.
+UNDERFLOW = -708.0
+# Recordings are split into this many groups of about equal rows, run in parallel.
+GROUPS = 16
 
-@njit(cache=True)
-def _recording(X, shift, means, factors, norms, startprob, transmat, moments, transitions):
-    """E-step of one recording ``X`` (n_rows, n_dims); adds to ``moments`` (K, D+1, D+1),
-    ``transitions`` (K, K); returns ``(log_likelihood, first-row posteriors)``."""
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _forward(X, stacked, offsets, norms, startprob, transmat, frames, alpha, scale):
+    """Frames, normalised forward variables and their normalisers ``c_t`` of one recording;
+    returns its log-likelihood.
+
+    ``stacked`` (n_dims, n_states * n_dims) holds the precision Cholesky factors ``P_k`` side
+    by side and ``offsets`` the products ``-mu_k P_k``: ``x @ stacked + offsets`` holds every
+    state's ``(x - mu_k) P_k`` (one long loop, which vectorises).
+    """
     n_rows, n_dims = X.shape
-    n_states = means.shape[0]
-    frames = np.empty((n_rows, n_states))
-    alpha = np.empty((n_rows, n_states))
-    scale = np.empty(n_rows)
-    log_likelihood = 0.0
+    n_states = norms.shape[0]
     log_density = np.empty(n_states)
+    projection = np.empty(offsets.shape[0])
+    log_likelihood = 0.0
     for t in range(n_rows):
-        # log N(x | mu_k, S_k) = norms[k] - ||(x - mu_k) P_k||^2 / 2, P_k upper triangular.
+        # log N(x | mu_k, S_k) = norms[k] - ||(x - mu_k) P_k||^2 / 2
+        projection[:] = offsets
+        for i in range(n_dims):
+            value = X[t, i]
+            for m in range(projection.shape[0]):
+                projection[m] += value * stacked[i, m]
         for k in range(n_states):
             distance = 0.0
-            for j in range(n_dims):
-                projection = 0.0
-                for i in range(j + 1):
-                    projection += (X[t, i] - means[k, i]) * factors[k, i, j]
-                distance += projection * projection
+            for m in range(k * n_dims, (k + 1) * n_dims):
+                distance += projection[m] * projection[m]
             log_density[k] = norms[k] - 0.5 * distance
         top = log_density.max()
         log_likelihood += top
+        for k in range(n_states):
+            gap = log_density[k] - top
+            frames[t, k] = 1.0 if gap == 0.0 else (0.0 if gap < UNDERFLOW else np.exp(gap))
         total = 0.0
         for j in range(n_states):
-            frames[t, j] = np.exp(log_density[j] - top)
             if t == 0:
                 prior = startprob[j]
             else:
@@ -54,73 +74,122 @@ def _recording(X, shift, means, factors, norms, startprob, transmat, moments, tr
         log_likelihood += np.log(total)
         for j in range(n_states):
             alpha[t, j] /= total
+    return log_likelihood
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _backward(X, shift, transmat, frames, alpha, scale, moments, transitions, start_counts):
+    """Backward recursion of one recording (after :func:`_forward`), adding the weighted
+    moments (K, n_pairs) of the upper triangle of ``[x - shift, 1] [x - shift, 1]^T``, the
+    terms ``alpha_t(i) b_j(x_{t+1}) beta_{t+1}(j) / c_{t+1}`` (times ``transmat`` later) and
+    the first row's posteriors."""
+    n_rows, n_dims = X.shape
+    n_states = transmat.shape[0]
     beta = np.ones(n_states)
-    previous = np.empty(n_states)
-    column = np.empty(n_dims + 1)
-    column[n_dims] = 1.0
+    weighted = np.empty(n_states)
+    column = np.ones(n_dims + 1)
+    pairs = np.empty(moments.shape[1])
     for t in range(n_rows - 1, -1, -1):
-        if t < n_rows - 1:
-            # beta_t(i) = sum_j A_ij b_j(x_{t+1}) beta_{t+1}(j) / c_{t+1}; xi adds in place.
-            for j in range(n_states):
-                previous[j] = frames[t + 1, j] * beta[j] / scale[t + 1]
-            for i in range(n_states):
-                value = 0.0
-                for j in range(n_states):
-                    term = transmat[i, j] * previous[j]
-                    transitions[i, j] += alpha[t, i] * term
-                    value += term
-                beta[i] = value
+        # posteriors alpha_t beta_t, normalised against round-off
+        norm = 0.0
+        for k in range(n_states):
+            norm += alpha[t, k] * beta[k]
         for d in range(n_dims):
             column[d] = X[t, d] - shift[d]
+        p = 0
+        for a in range(n_dims + 1):
+            for b in range(a, n_dims + 1):
+                pairs[p] = column[a] * column[b]
+                p += 1
         for k in range(n_states):
-            weight = alpha[t, k] * beta[k]
-            for a in range(n_dims + 1):
-                scaled = weight * column[a]
-                for b in range(a, n_dims + 1):
-                    moments[k, a, b] += scaled * column[b]
-    first_posteriors = alpha[0] * beta
-    return log_likelihood, first_posteriors
+            posterior = alpha[t, k] * beta[k] / norm
+            for p in range(pairs.shape[0]):
+                moments[k, p] += posterior * pairs[p]
+            if t == 0:
+                start_counts[k] += posterior
+        if t == 0:
+            break
+        # beta_{t-1}(i) = sum_j A_ij b_j(x_t) beta_t(j) / c_t
+        for j in range(n_states):
+            weighted[j] = frames[t, j] * beta[j] / scale[t]
+        for i in range(n_states):
+            value = 0.0
+            for j in range(n_states):
+                transitions[i, j] += alpha[t - 1, i] * weighted[j]
+                value += transmat[i, j] * weighted[j]
+            beta[i] = value
 
 
-@njit(cache=True, parallel=True)
-def _all_recordings(X, bounds, shift, means, factors, norms, startprob, transmat):
-    n_recordings, n_states, n_dims = bounds.shape[0] - 1, means.shape[0], means.shape[1]
-    moments = np.zeros((n_recordings, n_states, n_dims + 1, n_dims + 1))
-    transitions = np.zeros((n_recordings, n_states, n_states))
-    starts = np.zeros((n_recordings, n_states))
-    log_likelihoods = np.zeros(n_recordings)
-    for r in prange(n_recordings):
-        log_likelihoods[r], starts[r] = _recording(
-            X[bounds[r] : bounds[r + 1]],
-            shift,
-            means,
-            factors,
-            norms,
-            startprob,
-            transmat,
-            moments[r],
-            transitions[r],
-        )
-    return log_likelihoods.sum(), starts.sum(axis=0), transitions.sum(axis=0), moments.sum(axis=0)
+@njit(cache=True, parallel=True, error_model="numpy")
+def _all_recordings(X, bounds, groups, shift, stacked, offsets, norms, startprob, transmat):
+    n_groups, n_states, n_dims = groups.shape[0] - 1, norms.shape[0], X.shape[1]
+    n_pairs = (n_dims + 1) * (n_dims + 2) // 2
+    moments = np.zeros((n_groups, n_states, n_pairs))
+    transitions = np.zeros((n_groups, n_states, n_states))
+    start_counts = np.zeros((n_groups, n_states))
+    log_likelihoods = np.zeros(n_groups)
+    for g in prange(n_groups):
+        for r in range(groups[g], groups[g + 1]):
+            rows = X[bounds[r] : bounds[r + 1]]
+            frames = np.empty((rows.shape[0], n_states))
+            alpha = np.empty((rows.shape[0], n_states))
+            scale = np.empty(rows.shape[0])
+            log_likelihoods[g] += _forward(
+                rows, stacked, offsets, norms, startprob, transmat, frames, alpha, scale
+            )
+            _backward(
+                rows,
+                shift,
+                transmat,
+                frames,
+                alpha,
+                scale,
+                moments[g],
+                transitions[g],
+                start_counts[g],
+            )
+    log_likelihood, starts = 0.0, np.zeros(n_states)
+    counts, summed = np.zeros((n_states, n_states)), np.zeros((n_states, n_pairs))
+    for g in range(n_groups):
+        log_likelihood += log_likelihoods[g]
+        starts += start_counts[g]
+        counts += transitions[g]
+        summed += moments[g]
+    return log_likelihood, starts, counts * transmat, summed
+
+
+def recording_groups(bounds, n_groups=GROUPS):
+    """Recording indices splitting ``bounds`` into at most ``n_groups`` runs of about equal
+    rows (``n + 1`` edges)."""
+    bounds = np.asarray(bounds, dtype=np.int64)
+    targets = np.linspace(0, bounds[-1], n_groups + 1)[1:-1]
+    inner = np.searchsorted(bounds, targets)
+    return np.unique(np.concatenate([[0], inner, [len(bounds) - 1]])).astype(np.int64)
 
 
 def fused_e_step(X, bounds, params, shift):
     """:class:`skhmmgmr._em.Statistics` of rows ``X`` in recordings ``bounds`` (n + 1 edges)."""
     emissions = params.emissions
-    norms = emissions.log_normalizers()
-    log_likelihood, starts, transitions, moments = _all_recordings(
+    bounds = np.asarray(bounds, dtype=np.int64)
+    factors = emissions.precisions_chol
+    n_states, n_dims = emissions.means.shape
+    stacked = np.ascontiguousarray(factors.transpose(1, 0, 2).reshape(n_dims, -1))
+    offsets = -np.einsum("ki,kij->kj", emissions.means, factors).ravel()
+    log_likelihood, starts, transitions, pairs = _all_recordings(
         X,
-        np.asarray(bounds, dtype=np.int64),
+        bounds,
+        recording_groups(bounds),
         shift,
-        emissions.means,
-        np.ascontiguousarray(emissions.precisions_chol),
-        norms,
+        stacked,
+        offsets,
+        emissions.log_normalizers(),
         params.startprob,
-        params.transmat,
+        np.ascontiguousarray(params.transmat),
     )
-    n_dims = X.shape[1]
-    upper = np.triu(moments, 1)
-    moments = moments + upper.transpose(0, 2, 1)
+    rows, cols = np.triu_indices(n_dims + 1)
+    moments = np.zeros((n_states, n_dims + 1, n_dims + 1))
+    moments[:, rows, cols] = pairs
+    moments[:, cols, rows] = pairs
     return Statistics(
         float(log_likelihood),
         starts,

@@ -7,12 +7,17 @@ For every number of columns D, number of states K and recording length, the same
 - the fused numba reference (``_fused.py``: one pass per recording, recordings in parallel),
 - hmmlearn's ``GaussianHMM(covariance_type="full")`` (``--hmmlearn``; slow),
 
-and the time per iteration (median of the intervals between successive log-likelihoods) is
-printed side by side with rows per second. A plot of the cost against K (one line per D) and
+and the time per iteration is printed side by side with rows per second. Engine and reference
+run in turn ``--repeats`` times at every point (interleaved, so that a change of the machine's
+load hits both); a time is the smallest interval between two successive log-likelihoods over
+the repeats. Both run their compiled parts on ``--threads`` threads (default: numba's, all
+cores): the reference by ``prange`` (numba's workqueue layer), the engine on its own pool;
+BLAS is limited to one thread. A plot of the cost against K (one line per D) and
 against D is written to ``docs/_static/em_grid.png``. Run with::
 
     python benchmarks/bench_em_grid.py            # the whole grid, about 30 minutes
     python benchmarks/bench_em_grid.py --quick    # D in {3, 7, 19}, K in {2, 5, 6, 8, 10, 16}
+    python benchmarks/bench_em_grid.py --hmmlearn --dims 3 7 --states 5 10   # with hmmlearn
 """
 
 import argparse
@@ -24,6 +29,8 @@ import numpy as np
 from _data import make_recordings, standardized_joint
 from _fused import fused_baum_welch
 from bench_em import time_hmmlearn
+from numba import config as numba_config
+from numba import get_num_threads, set_num_threads
 from threadpoolctl import threadpool_limits
 
 from skhmmgmr._em import baum_welch, initialize_parameters
@@ -39,7 +46,7 @@ PLOT = Path(__file__).resolve().parents[1] / "docs" / "_static" / "em_grid.png"
 def _per_iteration(run):
     stamps = []
     run(lambda *_: stamps.append(time.perf_counter()))
-    return float(np.median(np.diff(stamps)))
+    return float(np.min(np.diff(stamps)))
 
 
 def measure(n_dims, n_states, length, args):
@@ -53,18 +60,33 @@ def measure(n_dims, n_states, length, args):
     )
     n_iter = args.iterations
     row = {"D": n_dims, "K": n_states, "length": length, "rows": n_rows}
-    with threadpool_limits(limits=args.threads, user_api="blas"):
-        row["engine_s"] = _per_iteration(
-            lambda cb: baum_welch(
-                joint, recordings, start, n_iter=n_iter, tol=0.0, reg_covar=1e-6, callback=cb
+    engine, reference = [], []
+    with threadpool_limits(limits=1, user_api="blas"):
+        for _ in range(args.repeats):
+            engine.append(
+                _per_iteration(
+                    lambda cb: baum_welch(
+                        joint,
+                        recordings,
+                        start,
+                        n_iter=n_iter,
+                        tol=0.0,
+                        reg_covar=1e-6,
+                        callback=cb,
+                    )
+                )
             )
-        )
-        row["reference_s"] = _per_iteration(
-            lambda cb: fused_baum_welch(joint, bounds, start, n_iter=n_iter, callback=cb)
-        )
+            reference.append(
+                _per_iteration(
+                    lambda cb: fused_baum_welch(
+                        joint, bounds, start, n_iter=n_iter, reg_covar=1e-6, callback=cb
+                    )
+                )
+            )
+        row["engine_s"], row["reference_s"] = min(engine), min(reference)
         if args.hmmlearn:
             times, _ = time_hmmlearn(joint, list(np.diff(bounds)), start, n_iter, "log")
-            row["hmmlearn_s"] = float(np.median(times))
+            row["hmmlearn_s"] = float(np.min(times))
     return row
 
 
@@ -103,9 +125,14 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rows", type=int, default=540_000)
     parser.add_argument("--iterations", type=int, default=4)
-    parser.add_argument("--threads", type=int, default=1, help="BLAS threads")
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--threads", type=int, default=None, help="numba threads")
+    parser.add_argument("--threading-layer", default="workqueue", help="numba's, for prange")
     parser.add_argument("--hmmlearn", action="store_true", help="also time hmmlearn (slow)")
     parser.add_argument("--quick", action="store_true", help="a subset of the grid")
+    parser.add_argument("--dims", type=int, nargs="+", help="values of D (default: the grid)")
+    parser.add_argument("--states", type=int, nargs="+", help="values of K (default: the grid)")
+    parser.add_argument("--lengths", nargs="+", choices=list(LENGTHS), help="recording lengths")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--output", help="write the rows as JSON")
     parser.add_argument("--plot", default=str(PLOT))
@@ -113,6 +140,13 @@ def main(argv=None):
     dims, states, lengths = DIMS, STATES, tuple(LENGTHS)
     if args.quick:
         dims, states, lengths = QUICK["dims"], QUICK["states"], QUICK["lengths"]
+    dims, states, lengths = args.dims or dims, args.states or states, args.lengths or lengths
+    # The reference's prange on numba's workqueue: OpenMP's spinning workers made it up to 4x
+    # slower on a loaded machine (the engine runs its own threads, see _fused_estep).
+    numba_config.THREADING_LAYER = args.threading_layer
+    if args.threads:
+        set_num_threads(args.threads)
+    print(f"{args.rows} rows, {get_num_threads()} numba thread(s), {args.repeats} repeats")
     print(
         f"{'length':>6} {'D':>3} {'K':>3} {'engine ms':>10} {'ref ms':>8} {'ratio':>6} "
         f"{'hmmlearn ms':>11} {'engine Mrows/s':>14}"
@@ -131,8 +165,8 @@ def main(argv=None):
                     f"{row['rows'] / row['engine_s'] / 1e6:>14.1f}",
                     flush=True,
                 )
-    if args.output:
-        Path(args.output).write_text(json.dumps(rows, indent=1))
+                if args.output:  # after every point: a cut run keeps what it measured
+                    Path(args.output).write_text(json.dumps(rows, indent=1))
     plot(rows, args.plot)
     print(f"plot: {args.plot}")
     return rows

@@ -1,8 +1,11 @@
 """Latency of one streaming update against ``predict`` on a one-row array.
 
 Fits a K=5, 3-input HMM-GMR model on generated recordings, then times 20,000 single calls of
-``FilterStream.update`` and 2,000 of ``model.predict`` with ``time.perf_counter_ns``, and
-prints the median and 99th percentile in microseconds. Run with::
+``FilterStream.update``, 20,000 of an adapting stream's update with the measured target
+(``relevance=16``: online MAP adaptation of the state means, with and without forgetting)
+and 2,000 of ``model.predict`` with ``time.perf_counter_ns``, and prints the median and 99th
+percentile in microseconds, and the cost of an adapting update relative to a plain one
+(target: at most 3x). Run with::
 
     python benchmarks/bench_streaming.py
 """
@@ -28,13 +31,18 @@ def make_data(n_recordings=4, length=500, seed=0):
     return X, y, groups
 
 
-def time_calls(function, rows, n_calls):
+def time_calls(function, rows, n_calls, targets=None):
     clock = time.perf_counter_ns
     elapsed = np.empty(n_calls, dtype=np.int64)
     for i in range(n_calls):
         row = rows[i % len(rows)]
-        start = clock()
-        function(row)
+        if targets is None:
+            start = clock()
+            function(row)
+        else:
+            target = float(targets[i % len(rows)])
+            start = clock()
+            function(row, target=target)
         elapsed[i] = clock() - start
     return elapsed / 1000.0
 
@@ -47,12 +55,29 @@ def report(name, microseconds):
 def main():
     X, y, groups = make_data()
     model = HMMGMRRegressor(n_states=N_STATES, random_state=0).fit(X, y, groups=groups)
-    stream = model.filter_stream()
-    rows = X[groups == 0]
-    # Warm up caches and BLAS before timing.
-    time_calls(stream.update, rows, 1000)
-    stream.reset()
-    report("FilterStream.update (1 sample)", time_calls(stream.update, rows, N_UPDATES))
+    rows, targets = X[groups == 0], y[groups == 0]
+    streams = {
+        "FilterStream.update (1 sample)": (model.filter_stream(), None),
+        "  adapting, forgetting=1": (model.filter_stream(relevance=16.0), targets),
+        "  adapting, forgetting=0.999": (
+            model.filter_stream(relevance=16.0, forgetting=0.999),
+            targets,
+        ),
+    }
+    # Warm up caches and BLAS, then time the streams in turn, in 4 rounds, so that a load
+    # change on a shared machine affects them alike.
+    for stream, with_targets in streams.values():
+        time_calls(stream.update, rows, 1000, with_targets)
+    elapsed = {name: [] for name in streams}
+    for _ in range(4):
+        for name, (stream, with_targets) in streams.items():
+            elapsed[name].append(time_calls(stream.update, rows, N_UPDATES // 4, with_targets))
+    plain = np.concatenate(elapsed["FilterStream.update (1 sample)"])
+    for name, parts in elapsed.items():
+        report(name, np.concatenate(parts))
+        if name.startswith("  "):
+            ratio = np.median(np.concatenate(parts)) / np.median(plain)
+            print(f"{'':<34} {ratio:.2f}x a plain update (median; target <= 3x)")
     one_row = rows[:, np.newaxis, :]
     report("model.predict (1-row array)", time_calls(model.predict, one_row, N_PREDICTS))
 

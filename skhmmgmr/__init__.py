@@ -1,6 +1,6 @@
 """skhmmgmr: Hidden Markov Model + Gaussian Mixture Regression for scikit-learn."""
 
-from . import datasets, feature_selection, metrics, selection, state_selection, utils
+from . import cluster, datasets, feature_selection, metrics, selection, state_selection, utils
 from ._fitted import FittedHMMGMR, Standardization
 from ._version import __version__
 from .estimator import HMMGMRRegressor
@@ -14,6 +14,7 @@ from .metrics import AccuracyScore, PerformanceScore, SmoothnessScore
 from .selection import SelectionReport, select_parameters
 from .state_selection import StateSelector
 from .streaming import FilterStream
+from .torque_pipeline import SteeringFeatures, make_torque_pipeline
 
 __all__ = [
     "AccuracyScore",
@@ -28,9 +29,12 @@ __all__ = [
     "SpearmanSelector",
     "Standardization",
     "StateSelector",
+    "SteeringFeatures",
     "__version__",
+    "cluster",
     "datasets",
     "feature_selection",
+    "make_torque_pipeline",
     "metrics",
     "select_parameters",
     "selection",

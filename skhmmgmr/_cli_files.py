@@ -9,10 +9,15 @@ Outputs: checked before the run, so that a long run never ends in an error it co
 reported at once (the folder exists and is writable, an input is never overwritten, a user's
 file or folder only with ``--overwrite``), then written beside the target and swapped in when
 complete, so that an interrupted run leaves the previous file as it was.
+
+Splits: data without a usable split column are split by recording at random
+(:func:`assign_splits`).
 """
 
 import os
 from pathlib import Path
+
+import numpy as np
 
 from ._report import check_replaceable
 from .datasets._frame import tidy_frame, time_order
@@ -145,3 +150,21 @@ def write_output(path, write):
         raise CommandError(f"cannot write {path}: {exc.strerror or exc}") from exc
     finally:
         partial.unlink(missing_ok=True)
+
+
+def assign_splits(frame, args):
+    """Train/validation/test by recording when the data has no usable split column."""
+    recordings = frame[RECORDING].unique()
+    if len(recordings) < 3:
+        raise CommandError(
+            f"{args.data}: {len(recordings)} recording(s); the framework needs at least 3 "
+            "(training, validation and test)"
+        )
+    order = np.random.default_rng(args.seed).permutation(recordings)
+    n_val = max(1, round(args.validation_fraction * len(order)))
+    n_test = max(1, round(args.test_fraction * len(order)))
+    if n_val + n_test >= len(order):
+        raise CommandError("--validation-fraction + --test-fraction leave no training recording")
+    split = {r: "validation" for r in order[:n_val]}
+    split.update({r: "test" for r in order[n_val : n_val + n_test]})
+    return frame[RECORDING].map(split).fillna("train")

@@ -50,7 +50,8 @@ k_min, k_max : int, default=1, 20
     # selectors and scorers
     "sampling_period": """\
 sampling_period : float, default=None
-    Seconds between two rows, for the smoothness (the time derivative of the estimate).""",
+    Seconds between two rows, for time derivatives (the smoothness of the estimate) and time
+    constants.""",
     # scorers
     "time_column": """\
 time_column : str, default=None

@@ -16,9 +16,12 @@ maximiser, so that every EM iteration raises the objective (up to round-off). Ad
 does, optimises no fixed function: with nearly collinear columns the log-likelihood then falls
 by up to 1e-5 (relative) in some iterations.
 
-The data are held once, as augmented columns (:class:`~skhmmgmr._em_data.Columns`). The E-step
-works block by block, a block holding whole consecutive recordings of about one cache-sized
-chunk of rows:
+The data are held once, as augmented columns (:class:`~skhmmgmr._em_data.Columns`). With
+complete data the E-step is one compiled pass per block of whole consecutive recordings
+(:mod:`skhmmgmr._fused_estep`: densities, forward, backward, expected transitions and moments
+row by row, blocks on several threads). The staged E-step below computes the same statistics
+(to round-off) and serves the rows with missing values. It works block by block, a block
+holding whole consecutive recordings of about one cache-sized chunk of rows:
 
 1. the emission log-densities of all states, one BLAS product per chunk
    (:meth:`~skhmmgmr._emissions.GaussianEmissions.density`), scaled to a maximum of one per row and
@@ -53,6 +56,7 @@ from sklearn.utils import check_random_state
 from ._em_data import EStepData
 from ._em_init import initial_emissions
 from ._emissions import MomentStatistics, make_emissions
+from ._fused_estep import applies, fused_pass
 from ._gaussian import MomentSums, NotPositiveDefiniteError, one_blas_thread, split_moments
 from ._kernels import backward_posteriors, forward
 
@@ -172,14 +176,29 @@ def _forward_blocks(engine, params):
 class _Expectations:
     """Backward pass block by block, accumulating the sufficient statistics."""
 
-    def __init__(self, engine, params):
+    def __init__(self, engine, params, method=None):
         self.engine, self.params = engine, params
         n_states = params.n_states
         self.accumulated = [k for k in range(n_states) if k != engine.remainder]
         self.start_counts = np.zeros(n_states)
         self.transition_sums = np.zeros((n_states, n_states))
-        self.sums = MomentSums(n_states, engine.data.values.shape[0], states=self.accumulated)
+        n_columns = engine.data.values.shape[0]
+        self.sums = MomentSums(n_states, n_columns, states=self.accumulated, method=method)
         self.missing_moments = 0.0  # what the missing values add (see _missing)
+
+    @classmethod
+    def fused(cls, engine, params, density):
+        """Statistics of every recording in one fused pass (:mod:`skhmmgmr._fused_estep`)."""
+        expectations = cls(engine, params, method="pairs")
+        log_likelihood, starts, transitions, pairs = fused_pass(
+            engine, params, density, expectations.accumulated
+        )
+        if log_likelihood == -np.inf:
+            _raise_impossible()
+        expectations.start_counts += starts
+        expectations.transition_sums += transitions
+        expectations.sums.add_pair_sums(pairs)
+        return expectations.statistics(log_likelihood)
 
     def add(self, block, frames, alpha, scale):
         (start, stop, rec_starts, rec_stops), n_states = block, self.params.n_states
@@ -214,6 +233,10 @@ class _Expectations:
 
 def e_step(engine, params):
     """Forward-backward over every recording, accumulating the sufficient statistics."""
+    with one_blas_thread():
+        density = params.emissions.density(engine.shift)
+        if applies(engine, density):
+            return _Expectations.fused(engine, params, density)
     expectations, log_likelihood = _Expectations(engine, params), 0.0
     with one_blas_thread():
         for block, frames, alpha, scale, block_log_likelihood in _forward_blocks(engine, params):
@@ -225,7 +248,11 @@ def e_step(engine, params):
 def _e_step_unless(engine, params, is_last):
     """``(log_likelihood, statistics)``; the statistics are None when ``is_last(log_likelihood)``
     and the forward pass was kept, which saves the backward pass of the final E-step."""
-    if 2 * engine.data.n_samples * params.n_states > KEPT_FORWARD_VALUES:
+    if 2 * engine.data.n_samples * params.n_states > KEPT_FORWARD_VALUES or applies(
+        engine, params.emissions.density(engine.shift)
+    ):
+        # the fused E-step keeps no forward pass: its backward pass costs less than a second
+        # forward pass would
         stats = e_step(engine, params)
         return stats.log_likelihood, stats
     passes = list(_forward_blocks(engine, params))
@@ -245,6 +272,12 @@ def score_hmm(X, recordings, params):
 
 def _score(engine, params):
     with one_blas_thread():
+        density = params.emissions.density(engine.shift)
+        if applies(engine, density):
+            log_likelihood = fused_pass(engine, params, density, [], backward=False)[0]
+            if log_likelihood == -np.inf:
+                _raise_impossible()
+            return float(log_likelihood)
         return float(sum(item[-1] for item in _forward_blocks(engine, params)))
 
 
@@ -254,16 +287,32 @@ def m_step(stats, previous, prior):
     The emission's M-step (with its ``prior``, see
     :meth:`~skhmmgmr._emissions.GaussianEmissions.maximize`); a transition row with no
     expected transitions keeps its previous values. Both keep the objective non-decreasing
-    (a generalised EM step).
+    (a generalised EM step). Probabilities are floored at :data:`PROBABILITY_FLOOR`.
     """
-    startprob = stats.start_counts / stats.start_counts.sum()
+    startprob = _floored(stats.start_counts / stats.start_counts.sum())
     row_sums = stats.transition_counts.sum(axis=1, keepdims=True)
     transmat = np.where(
         row_sums > 0,
         stats.transition_counts / np.where(row_sums > 0, row_sums, 1.0),
         previous.transmat,
     )
+    transmat = _floored(transmat)
     return HMMParameters(startprob, transmat, previous.emissions.maximize(stats.emission, prior))
+
+
+# A start or transition probability that the expected counts make exactly zero is raised to
+# this. The forward pass zeroes the densities more than exp(-708) below a row's largest, so
+# with an exact zero a sharp state can become unreachable at the one row that needs it, and
+# the recording impossible (a FloatingPointError in the next E-step). With the floor the
+# state a row favours keeps at least floor * 1e-30 (the lazy rescaling's threshold), still a
+# normal double; the change to the objective (about 1e-250 per floored entry) is far below
+# any tolerance.
+PROBABILITY_FLOOR = 1e-250
+
+
+def _floored(probabilities):
+    floored = np.maximum(probabilities, PROBABILITY_FLOOR)
+    return floored / floored.sum(axis=-1, keepdims=True)
 
 
 def initialize_parameters(
@@ -327,6 +376,14 @@ def baum_welch(X, recordings, params, *, n_iter, tol, reg_covar, callback=None, 
     return EMResult(params, history[-1], history, n_done, converged, objectives[-1], objectives)
 
 
+def em_failure(exc, reg_covar):
+    """The user's error for a covariance that lost positive definiteness during EM."""
+    return ValueError(
+        f"EM failed: {exc}. The data are probably collinear or a state collapsed on "
+        f"a few rows (reg_covar={reg_covar})."
+    )
+
+
 def fit_hmm(
     X,
     recordings,
@@ -376,10 +433,7 @@ def fit_hmm(
                 engine=engine,
             )
         except NotPositiveDefiniteError as exc:
-            raise ValueError(
-                f"EM failed: {exc}. The data are probably collinear or a state collapsed on "
-                f"a few rows (reg_covar={reg_covar})."
-            ) from exc
+            raise em_failure(exc, reg_covar) from exc
         if best is None or result.objective > best.objective:
             best = result
     return best

@@ -67,6 +67,24 @@ def _nearest_centre(centers):
     return responsibilities
 
 
+def initial_centers(data, n_states, init_params, random_state):
+    """The K centres (about the shift) of the initialisations by centres (every method but
+    ``"random"``), found on :func:`_init_sample`'s rows of ``data`` (anything with
+    ``n_samples`` and ``rows(index)``, such as :class:`~skhmmgmr._em_data.Columns`)."""
+    sample = _init_sample(data, random_state)
+    if init_params == "kmeans":
+        return _kmeans_centers(sample, n_states, random_state)
+    if init_params == "k-means++":
+        return kmeans_plusplus(sample, n_states, random_state=random_state)[0]
+    return sample[random_state.choice(len(sample), size=n_states, replace=False)]
+
+
+def centre_statistics(engine, centers):
+    """Moment statistics of the rows ``engine`` holds, every row given to its nearest of the
+    ``centers`` (about the shift); those of disjoint sets of rows merge."""
+    return _initial_moments(engine, centers.shape[0], _nearest_centre(centers))
+
+
 def initial_emissions(engine, n_states, init_params, reg_covar, random_state, covariance_type):
     """First emission parameters for the rows the E-step ``engine`` holds.
 
@@ -81,13 +99,7 @@ def initial_emissions(engine, n_states, init_params, reg_covar, random_state, co
             engine, n_states, lambda lo, hi, chunk: np.ascontiguousarray(resp[lo:hi].T)
         )
     else:
-        sample = _init_sample(data, random_state)
-        if init_params == "kmeans":
-            centers = _kmeans_centers(sample, n_states, random_state)
-        elif init_params == "k-means++":
-            centers, _ = kmeans_plusplus(sample, n_states, random_state=random_state)
-        else:
-            centers = sample[random_state.choice(len(sample), size=n_states, replace=False)]
-        statistics = _initial_moments(engine, n_states, _nearest_centre(centers))
+        centers = initial_centers(data, n_states, init_params, random_state)
+        statistics = centre_statistics(engine, centers)
     pooled = MomentStatistics(*split_moments(engine.totals[np.newaxis]), engine.shift)
     return emission_family(covariance_type).from_moments(statistics, reg_covar, pooled)

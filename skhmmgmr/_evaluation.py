@@ -30,6 +30,7 @@ from sklearn.utils.validation import check_memory
 from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
+from ._cluster_search import dask_client, scatter_once
 from ._validation import check_sampling_period
 from ._version import __version__
 from .metrics import evaluate_recordings
@@ -178,7 +179,13 @@ def _shared_with_workers(folds, n_jobs):
     tracker of joblib's process backend (loky), a process that outlives the run as it does
     for joblib's own memory-mapping folder: the tracker deletes it when the killed process and
     its workers are gone (idle workers exit after joblib's ``idle_worker_timeout``, 300 s).
+    Under joblib's dask backend the arrays are scattered to the workers once instead
+    (:mod:`skhmmgmr._cluster_search`).
     """
+    client = dask_client()
+    if client is not None:
+        yield scatter_once(client, folds)
+        return
     if n_jobs in (None, 1):
         yield folds
         return

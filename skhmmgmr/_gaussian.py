@@ -243,6 +243,12 @@ class MomentSums:
             rooted = chunk * np.sqrt(respT[k])
             self._sums[k] += rooted @ rooted.T
 
+    def add_pair_sums(self, sums):
+        """Add moments already summed over rows: ``sums`` (len(states), n_pairs) holds, per
+        accumulated state, the weighted sums of ``x_a x_b`` for the pairs ``a <= b`` in the
+        order of :func:`numpy.triu_indices` (method ``"pairs"`` only)."""
+        self._sums += sums
+
     def _add_pairs(self, respT, columns, first, n_rows):
         n_pairs = len(self._pairs[0])
         step = min(self.sub_chunk, n_rows)
@@ -261,7 +267,7 @@ class MomentSums:
             return self._sums
         moments = np.zeros((self.n_states, self.n_columns, self.n_columns))
         rows, cols = self._pairs
-        states = np.asarray(self.states)[:, np.newaxis]
+        states = np.asarray(self.states, dtype=np.intp)[:, np.newaxis]
         moments[states, rows, cols] = self._sums
         moments[states, cols, rows] = self._sums
         return moments

@@ -40,6 +40,15 @@ _VECTORISED = {"reassoc", "contract"}
 
 
 @njit(inline="always")
+def normalise_row(alpha, t, total):
+    """Divide the forward variables of row ``t`` by their ``total``; returns ``log(total)``."""
+    inverse = 1.0 / total
+    for j in range(alpha.shape[1]):
+        alpha[t, j] *= inverse
+    return np.log(total)
+
+
+@njit(inline="always")
 def _forward_body(frames, starts, stops, startprob, transmat_t, alpha, scale, restart, lazy):
     n_states = frames.shape[1]
     log_likelihood = 0.0
@@ -69,10 +78,7 @@ def _forward_body(frames, starts, stops, startprob, transmat_t, alpha, scale, re
                     alpha[t, j] = frames[t, j]
                     total += frames[t, j]
             scale[t] = total
-            log_likelihood += np.log(total)
-            inverse = 1.0 / total
-            for j in range(n_states):
-                alpha[t, j] *= inverse
+            log_likelihood += normalise_row(alpha, t, total)
     return log_likelihood
 
 

@@ -11,11 +11,12 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
+from ._cli_cluster import add_scheduler_option, scheduler_context
 from ._cli_files import (
     CommandError,
+    assign_splits,
     check_columns,
     check_output,
     in_time_order,
@@ -101,18 +102,19 @@ def _run_framework(args, data, meta):
     bar = _progress(args, 3, "skhmmgmr")
     bar.set_postfix_str("parameter selection")
     try:
-        report = select_parameters(
-            data,
-            candidate_features=args.features,
-            n_top=args.n_top,
-            k_max=args.k_max,
-            trade_off=args.trade_off,
-            relevance_trade_offs=relevance_trade_offs,
-            sampling_period=period,
-            n_jobs=args.n_jobs,
-            progress=not args.quiet,
-            random_state=args.seed,
-        )
+        with scheduler_context(args):
+            report = select_parameters(
+                data,
+                candidate_features=args.features,
+                n_top=args.n_top,
+                k_max=args.k_max,
+                trade_off=args.trade_off,
+                relevance_trade_offs=relevance_trade_offs,
+                sampling_period=period,
+                n_jobs=args.n_jobs,
+                progress=not args.quiet,
+                random_state=args.seed,
+            )
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
     bar.update()
@@ -135,6 +137,7 @@ def _run_framework(args, data, meta):
         "empty candidate subsets": ", ".join(report.empty_candidates) or "none",
         "seed": args.seed,
         "n_jobs": args.n_jobs,
+        "scheduler": args.scheduler or "joblib on this machine",
         **{f"time: {k} [s]": f"{v:.1f}" for k, v in timings.items()},
     }
     try:
@@ -214,24 +217,6 @@ def command_demo(args):
     return _run_framework(args, data, meta)
 
 
-def _assign_splits(frame, args):
-    """Train/validation/test by recording when the data has no usable split column."""
-    recordings = frame[RECORDING].unique()
-    if len(recordings) < 3:
-        raise CommandError(
-            f"{args.data}: {len(recordings)} recording(s); the framework needs at least 3 "
-            "(training, validation and test)"
-        )
-    order = np.random.default_rng(args.seed).permutation(recordings)
-    n_val = max(1, round(args.validation_fraction * len(order)))
-    n_test = max(1, round(args.test_fraction * len(order)))
-    if n_val + n_test >= len(order):
-        raise CommandError("--validation-fraction + --test-fraction leave no training recording")
-    split = {r: "validation" for r in order[:n_val]}
-    split.update({r: "test" for r in order[n_val : n_val + n_test]})
-    return frame[RECORDING].map(split).fillna("train")
-
-
 def command_select(args):
     """The framework on the user's recordings."""
     from .datasets import load_recordings
@@ -262,7 +247,7 @@ def command_select(args):
     if splits <= {"train", "validation", "test"} and len(splits) == 3:
         rule = f"the '{args.split}' column"
     elif splits == {"unknown"}:
-        data[SPLIT] = _assign_splits(data, args)
+        data[SPLIT] = assign_splits(data, args)
         rule = (
             f"recordings drawn at random (seed {args.seed}): {args.validation_fraction:.0%} "
             f"validation, {args.test_fraction:.0%} test, the rest training"
@@ -382,6 +367,7 @@ def _add_framework_options(parser, defaults=None):
     parser.add_argument(
         "--n-jobs", type=int, default=-1, help="parallel fits with joblib; -1: all cores"
     )
+    add_scheduler_option(parser)
     _add_output_options(parser, "skhmmgmr_report", "report folder")
     text = "accuracy/smoothness weights of every choice"
     parser.add_argument("--trade-off", default=framework["trade_off"], help=text)

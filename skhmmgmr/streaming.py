@@ -19,7 +19,6 @@ conditioned on its observed inputs (:func:`~skhmmgmr._missing.gmr_given_observed
 """
 
 import math
-from collections.abc import Mapping
 
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
@@ -28,6 +27,8 @@ from ._fitted import FittedHMMGMR
 from ._missing import gmr_given_observed
 from ._panel import read_row_order
 from ._sequences import as_recordings
+from ._stream_adaptation import OnlineMeans, check_adaptation
+from ._stream_inputs import as_batch, as_row
 
 FLAG_OK = "ok"
 FLAG_NON_FINITE = "non-finite"
@@ -35,6 +36,7 @@ FLAG_OUTLIER = "outlier"
 FLAG_RESTARTED = "restarted"
 FLAG_MISSING = "missing"
 _HELD_FLAGS = (FLAG_NON_FINITE, FLAG_OUTLIER)
+_LEARNED_FLAGS = (FLAG_OK, FLAG_RESTARTED)
 _MAX_STANDARDISED = 1e100
 
 
@@ -60,6 +62,13 @@ class FilterStream:
         as ``predict`` of a model with ``missing_values="marginalize"`` does (flag
         ``"missing"``). ``None``: the estimator's ``missing_values`` when ``model`` is an
         estimator, "error" for a :class:`~skhmmgmr.FittedHMMGMR`.
+    relevance : float, default=None
+        Online adaptation of the state means (see Notes): the relevance factor ``r`` > 0 of
+        the MAP rule of :meth:`HMMGMRRegressor.adapt <skhmmgmr.HMMGMRRegressor.adapt>`.
+        ``None``: no adaptation, the stream is the fitted model's.
+    forgetting : float, default=1.0
+        Forgetting factor in (0, 1] of the adaptation statistics, applied at every learned
+        sample (memory of about ``1 / (1 - forgetting)`` samples); 1 forgets nothing.
 
     Attributes
     ----------
@@ -98,6 +107,13 @@ class FilterStream:
 
     No NaN or infinity ever comes out of :meth:`update`.
 
+    Online adaptation (``relevance`` given): an update given the measured ``target`` returns
+    the current model's estimate, then moves the state means by the MAP rule of ``adapt``
+    (fitted means as the prior), recursively, from decayed statistics of the filtered state
+    probabilities: a bounded cost per update (:mod:`skhmmgmr._stream_adaptation`). Held
+    samples and those with missing inputs do not learn. :meth:`reset` keeps what was
+    learned, :meth:`reset_adaptation` forgets it, :meth:`adapted_model` returns it.
+
     Examples
     --------
     >>> import numpy as np
@@ -115,7 +131,13 @@ class FilterStream:
     """
 
     def __init__(
-        self, model, *, min_log_density=math.log(np.finfo(float).tiny), missing_values=None
+        self,
+        model,
+        *,
+        min_log_density=math.log(np.finfo(float).tiny),
+        missing_values=None,
+        relevance=None,
+        forgetting=1.0,
     ):
         if missing_values is None:
             missing_values = getattr(model, "missing_values", "error")
@@ -125,9 +147,11 @@ class FilterStream:
             )
         self.missing_values = missing_values
         self._marginalize = missing_values == "marginalize"
+        self.relevance, self.forgetting = check_adaptation(relevance, forgetting)
         if not isinstance(model, FittedHMMGMR):
             check_is_fitted(model)
             model = model.model_
+        self._model = model
         params, scaling = model.gmr, model.standardization
         n_states, n_outputs, n_inputs = params.coef.shape
         self.n_features_in_ = n_inputs
@@ -163,6 +187,9 @@ class FilterStream:
         block_sum[n_terms] = density.norms[:, 0]
         self._block_sum = block_sum
         n_whitened = n_terms
+        self._online = None
+        if relevance is not None:  # rewrites the constant row of the weights in place
+            self._online = OnlineMeans(model, weights[n_inputs], n_terms, relevance, forgetting)
 
         self._z = np.ones(n_inputs + 1)
         self._z_inputs = self._z[:n_inputs]
@@ -175,17 +202,32 @@ class FilterStream:
         # means of the last accepted sample (needed for the std of a held estimate).
         self._work = self._product_buffer(weights.shape[1], n_whitened)
         self._accepted = self._product_buffer(weights.shape[1], n_whitened)
+        self._set_prior(model)
+        self.reset()
+
+    def _set_prior(self, model):
+        """The estimate and std before any accepted sample: the prior mixture of ``model``."""
         mean, std = model.prior_output()
         if self._scalar_output:
             self._prior_estimate, self._prior_std = float(mean[0]), float(std[0])
         else:
             self._prior_estimate, self._prior_std = mean, std
-        self.reset()
 
-    def _product_buffer(self, width, n_whitened):
-        product = np.empty(width)
+    def _product_buffer(self, width, n_whitened, product=None):
+        product = np.empty(width) if product is None else product
         means = product[n_whitened:].reshape(self._n_states, self._n_outputs)
         return product, product[:n_whitened], means[:, 0] if self._scalar_output else means
+
+    def __setstate__(self, state):
+        """Unpickle, then link the buffer views again (pickling copies every view)."""
+        self.__dict__.update(state)
+        n_inputs, n_whitened = self.n_features_in_, self._squares.shape[0] - 1
+        self._z_inputs, self._squares_head = self._z[:n_inputs], self._squares[:n_whitened]
+        width = self._weights.shape[1]
+        self._work = self._product_buffer(width, n_whitened, self._work[0])
+        self._accepted = self._product_buffer(width, n_whitened, self._accepted[0])
+        if self._online is not None:
+            self._online.bias = self._weights[n_inputs]
 
     def reset(self):
         """Restart the filter at the beginning of a new recording.
@@ -194,6 +236,8 @@ class FilterStream:
         -------
         self : FilterStream
         """
+        if self._online is not None and self._online.n_learned:
+            self._set_prior(self._online.fitted_model())
         self._prior[:] = self._startprob
         self._alpha[:] = self._startprob
         self._started = False
@@ -202,6 +246,29 @@ class FilterStream:
         self.n_samples_ = 0
         self.recording_ = None
         return self
+
+    def reset_adaptation(self):
+        """Forget the learned samples: the stream reads the fitted model again.
+
+        Returns
+        -------
+        self : FilterStream
+        """
+        if self._online is not None and self._online.n_learned:
+            self._online.clear()
+            self._set_prior(self._model)
+            if not self._started:
+                self._last_estimate = self._prior_estimate
+        return self
+
+    def adapted_model(self):
+        """The model with the adapted state means, a :class:`~skhmmgmr.FittedHMMGMR`.
+
+        The fitted model when nothing was learned (or ``relevance=None``). Make an estimator
+        of it with :meth:`HMMGMRRegressor.from_fitted_model
+        <skhmmgmr.HMMGMRRegressor.from_fitted_model>`: it exports and pickles as any.
+        """
+        return self._model if self._online is None else self._online.fitted_model()
 
     @property
     def state_proba_(self):
@@ -216,7 +283,7 @@ class FilterStream:
         """Whether the last update was held (non-finite or outlier sample)."""
         return self.last_flag_ in _HELD_FLAGS
 
-    def update(self, features, return_std=False, return_flag=False):
+    def update(self, features, return_std=False, return_flag=False, *, target=None):
         """Filter one sample and return the estimate of the outputs.
 
         Parameters
@@ -228,6 +295,9 @@ class FilterStream:
             Also return the predictive standard deviation.
         return_flag : bool, default=False
             Also return :attr:`last_flag_`.
+        target : float or array-like of shape (n_outputs,), default=None
+            The measured outputs of this sample, learned after the estimate (only with
+            ``relevance``; a NaN target is not learned).
 
         Returns
         -------
@@ -238,10 +308,14 @@ class FilterStream:
         if type(features) is np.ndarray and features.shape == self._z_inputs.shape:
             row = features
         else:
-            row = self._as_row(features)
+            row = as_row(features, getattr(self, "feature_names_in_", None), self.n_features_in_)
+        if target is not None:
+            self._check_learns()
         np.subtract(row, self._input_center, out=self._z_inputs)
         np.divide(self._z_inputs, self._input_scale, out=self._z_inputs)
         estimate = self._step()
+        if target is not None:
+            self._learn(target)
         if not (return_std or return_flag):
             return estimate
         result = (estimate,)
@@ -297,6 +371,15 @@ class FilterStream:
             self._last_estimate = estimate.copy()
         return estimate
 
+    def _check_learns(self):
+        if self._online is None:
+            raise ValueError("a target is learned only by a stream with relevance set")
+
+    def _learn(self, target):
+        """Learn the measured outputs of the last sample (see the Notes)."""
+        if self.last_flag_ in _LEARNED_FLAGS:
+            self._online.learn_target(self._alpha, self._z_inputs, target)
+
     def _missing_frames(self, means):
         """Scaled input densities of a sample whose NaN inputs are missing, given its observed
         inputs (None for an outlier); writes the state output means given them into ``means``
@@ -305,7 +388,8 @@ class FilterStream:
         z = np.where(missing, 0.0, self._z_inputs)[np.newaxis]
         if not np.sum(np.abs(z)) < _MAX_STANDARDISED:
             return None
-        log_prob, state_means, added = gmr_given_observed(self._gmr, z, missing[np.newaxis])
+        params = self._gmr if self._online is None else self._online.gmr()
+        log_prob, state_means, added = gmr_given_observed(params, z, missing[np.newaxis])
         log_prob = log_prob[0]
         top = log_prob.max()
         if not (missing.all() or top >= self.min_log_density and np.isfinite(log_prob).all()):
@@ -336,7 +420,7 @@ class FilterStream:
         std = np.sqrt(variance) * self._output_scale
         return float(std[0]) if self._scalar_output else std
 
-    def update_batch(self, X, return_std=False, return_flag=False):
+    def update_batch(self, X, return_std=False, return_flag=False, *, y=None):
         """Filter several consecutive samples, carrying the filter state on.
 
         Equivalent to calling :meth:`update` on every row in turn. A DataFrame whose index
@@ -354,6 +438,8 @@ class FilterStream:
             Also return the predictive standard deviations.
         return_flag : bool, default=False
             Also return the flag of every sample.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs), default=None
+            The measured outputs, learned after every estimate (only with ``relevance``).
 
         Returns
         -------
@@ -362,7 +448,13 @@ class FilterStream:
         flags : ndarray of str of shape (n_samples,), only when ``return_flag`` is True
         """
         rows = read_row_order(X)
-        X = self._as_batch(rows.to_filter_order(X))
+        names = getattr(self, "feature_names_in_", None)
+        X = as_batch(rows.to_filter_order(X), names, self.n_features_in_)
+        if y is not None:
+            self._check_learns()
+            y = np.asarray(rows.to_filter_order(y), dtype=float)
+            if y.shape[0] != X.shape[0]:
+                raise ValueError(f"y has {y.shape[0]} rows, X {X.shape[0]}")
         restarts = self._recording_starts(rows.groups, X.shape[0])
         shape = (X.shape[0],) if self._scalar_output else (X.shape[0], self._n_outputs)
         estimates = np.empty(shape)
@@ -375,6 +467,8 @@ class FilterStream:
             np.subtract(row, self._input_center, out=z_inputs)
             np.divide(z_inputs, self._input_scale, out=z_inputs)
             estimates[i] = self._step()
+            if y is not None:
+                self._learn(y[i])
             if return_std:
                 std[i] = self._std()
             if return_flag:
@@ -393,44 +487,3 @@ class FilterStream:
         if self.recording_ is not None and recordings.ids[0] == self.recording_:
             del starts[0]  # the batch goes on with the recording of the previous batch
         return starts
-
-    def _as_row(self, features):
-        names = getattr(self, "feature_names_in_", None)
-        if isinstance(features, Mapping) or _is_series(features):
-            if names is None:
-                raise ValueError(
-                    "features given by name, but the model was fitted without feature names; "
-                    "give a 1-D array in the order of the training columns"
-                )
-            missing = [name for name in names if name not in features]
-            if missing:
-                raise ValueError(f"features lacks the input(s) {missing} the model was fitted on")
-            return np.array([features[name] for name in names], dtype=float)
-        row = np.asarray(features, dtype=float)
-        if row.shape != self._z_inputs.shape:
-            raise ValueError(
-                f"update takes one sample of shape ({self.n_features_in_},), got shape "
-                f"{row.shape}; use update_batch for several samples"
-            )
-        return row
-
-    def _as_batch(self, X):
-        names = getattr(self, "feature_names_in_", None)
-        if hasattr(X, "columns"):
-            if names is not None:
-                missing = [name for name in names if name not in X.columns]
-                if missing:
-                    raise ValueError(f"X lacks the column(s) {missing} the model was fitted on")
-                X = X[list(names)]
-            X = X.to_numpy(dtype=float)
-        X = np.asarray(X, dtype=float)
-        if X.ndim != 2 or X.shape[1] != self.n_features_in_:
-            raise ValueError(
-                f"update_batch takes an array of shape (n_samples, {self.n_features_in_}), got "
-                f"shape {X.shape}"
-            )
-        return X
-
-
-def _is_series(features):
-    return hasattr(features, "index") and hasattr(features, "to_numpy") and features.ndim == 1

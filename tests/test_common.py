@@ -24,6 +24,7 @@ from skhmmgmr import (
     HMMGMRRegressor,
     SpearmanSelector,
     StateSelector,
+    SteeringFeatures,
 )
 from skhmmgmr.utils import expected_failed_checks
 
@@ -43,6 +44,8 @@ ESTIMATORS = [
     ForwardFeatureSelector(max_features=1, **SEARCH),
     # K >= 2 whatever the data: predict is then a causal filter, as the declared failures say
     StateSelector(k_min=2, k_max=3, **SEARCH),
+    # columns by position: the checks pass arrays without names, some with a single column
+    SteeringFeatures(friction_column=0, load_columns=(0,)),
 ]
 # Configurations as users write them, for which fit (or predict) cannot run on the checks'
 # data: every check that needs it is declared, and must fail.

@@ -1,0 +1,342 @@
+"""What a user would pick instead: ridge, gradient boosting and the package's models, side by side.
+
+On the simulator's protocol (``make_driving_protocol``: three driver styles, 36 training, 18
+validation and 18 test recordings of 5 minutes, measured sensors), for every seed and sampling
+rate asked for, every model is fitted on the training recordings and scored on the test
+recordings:
+
+- ``RidgeCV`` and ``HistGradientBoostingRegressor(max_iter=300)`` on the 18 features;
+- gradient boosting with causal lags of the last second (every feature 0.1, 0.25, 0.5 and 1 s
+  back, within its recording; the first rows repeat the first value);
+- ``HMMGMRRegressor`` with 5 and 8 states on the 18 features (the thesis' model);
+- ``make_torque_pipeline`` (the steering system's derived inputs, then HMM-GMR) with the number
+  of states chosen on the validation recordings by mean accuracy, then, at that number, the
+  velocity filter of the friction input (none or 20 ms) chosen the same way.
+
+Printed per model: mean and worst-recording test accuracy (%), roughness (std of the estimate's
+time derivative, Nm/s, the thesis' smoothness), the D.5-normalised performance score at the
+thesis' 50/50 trade-off (lower is better; normalised over the models of the table), fit time,
+predict throughput (rows/s on the test set) and per-sample streaming latency (median of 2,000
+single-row calls: ``FilterStream.update`` for the HMM models, plus the derived inputs computed
+in numpy for the pipeline; ``predict`` on a one-row array for the others). Then the same
+accuracy and roughness per driver style, and the targets of the pipeline against the plain
+boosting baseline. Run with::
+
+    python benchmarks/bench_baselines.py                      # seeds 0 1 2, 20 and 100 Hz
+    python benchmarks/bench_baselines.py --seeds 0 --rates 20  # one table, about 2 minutes
+    python benchmarks/bench_baselines.py --quick               # 1-minute recordings
+
+``--output results.json`` saves every per-recording figure. ``--residuals`` prints instead
+why the thesis' model loses: the mean test residual of ``HMMGMRRegressor`` (K=5, 18 features)
+and of the pipeline (K=5) in bins of lateral acceleration and of steering-wheel velocity, and
+the share of the rows and the lateral-acceleration range of each of the model's states (first
+seed and rate).
+"""
+
+import argparse
+import json
+import time
+import warnings
+
+import numpy as np
+import pandas as pd
+import sklearn
+from sklearn.ensemble import HistGradientBoostingRegressor
+from sklearn.linear_model import RidgeCV
+
+from skhmmgmr import HMMGMRRegressor, make_torque_pipeline
+from skhmmgmr.datasets import FEATURE_NAMES, make_driving_protocol
+from skhmmgmr.metrics import normalize_performance, recording_metrics
+
+FEATURES = list(FEATURE_NAMES)
+LAGS_S = (0.1, 0.25, 0.5, 1.0)
+STYLES = ("defensive", "aggressive", "novice")
+PIPELINE = "make_torque_pipeline"
+
+
+def add_lags(frame, rate):
+    """Each feature ``LAGS_S`` seconds back, within its recording."""
+    by_recording = frame.groupby("recording", sort=False)[FEATURES]
+    first = by_recording.transform("first")
+    lagged = {}
+    for lag in LAGS_S:
+        steps = round(lag * rate)
+        shifted = by_recording.shift(steps).fillna(first)
+        lagged.update({f"{c}_lag{lag}s": shifted[c] for c in FEATURES})
+    return pd.concat([frame, pd.DataFrame(lagged, index=frame.index)], axis=1)
+
+
+def score(y, pred, frame, rate):
+    metrics = recording_metrics(
+        y, pred, groups=frame["recording"].to_numpy(), sampling_period=1.0 / rate
+    )
+    styles = frame.groupby("recording", sort=False)["driver"].first().reindex(metrics.ids)
+    return pd.DataFrame(
+        {
+            "recording": metrics.ids,
+            "driver": styles.to_numpy(),
+            "accuracy": metrics.accuracy[:, 0],
+            "smoothness": metrics.smoothness[:, 0],
+        }
+    )
+
+
+def median_latency_us(function, rows, n_calls=2000):
+    for row in rows[:200]:
+        function(row)
+    elapsed = np.empty(n_calls)
+    for i in range(n_calls):
+        row = rows[i % len(rows)]
+        start = time.perf_counter_ns()
+        function(row)
+        elapsed[i] = time.perf_counter_ns() - start
+    return float(np.median(elapsed)) / 1000.0
+
+
+def derived_row(row, columns, state):
+    """The pipeline's derived inputs for one row, in numpy, as a stream would compute them
+    (``state``: the filtered velocity and the filter's decay, or None)."""
+    v, angle, acceleration = row[columns]
+    if state is not None:
+        state[0] = state[1] * state[0] + (1.0 - state[1]) * v
+        v = state[0]
+    extra = np.array(
+        [
+            np.tanh(v / 0.1),
+            angle * abs(angle),
+            angle**3,
+            acceleration * abs(acceleration),
+            acceleration**3,
+        ]
+    )
+    return np.concatenate([row, extra])
+
+
+def stream_latency(model, rows, derive=None):
+    stream = model.filter_stream()
+    if derive is None:
+        return median_latency_us(stream.update, rows)
+    return median_latency_us(lambda row: stream.update(derive(row)), rows)
+
+
+def fit_predict(model, train, test, columns, grouped):
+    """Fit and predict, the recordings routed to every step that asks for them."""
+    fit_kw = {"groups": train["recording"].to_numpy()} if grouped else {}
+    predict_kw = {"groups": test["recording"].to_numpy()} if grouped else {}
+    with sklearn.config_context(enable_metadata_routing=True):
+        start = time.perf_counter()
+        model.fit(train[columns], train["driver_torque"].to_numpy(), **fit_kw)
+        fit_s = time.perf_counter() - start
+        start = time.perf_counter()
+        pred = model.predict(test[columns], **predict_kw)
+    return pred, fit_s, len(test) / (time.perf_counter() - start)
+
+
+def evaluate(name, model, train, test, rate, columns, grouped):
+    pred, fit_s, rows_per_s = fit_predict(model, train, test, columns, grouped)
+    table = score(test["driver_torque"].to_numpy(), pred, test, rate)
+    rows = test[columns].to_numpy()[:2000]
+    if name.startswith(PIPELINE):
+        positions = [
+            columns.index(c)
+            for c in ("steering_wheel_velocity", "steering_wheel_angle", "lateral_acceleration")
+        ]
+        features = model[0]
+        state = None
+        if features.velocity_filter is not None:
+            state = [0.0, np.exp(-features.sampling_period / features.velocity_filter)]
+        latency = stream_latency(model[-1], rows, lambda row: derived_row(row, positions, state))
+    elif grouped:
+        latency = stream_latency(model, rows)
+    else:
+        latency = median_latency_us(model.predict, rows[:, np.newaxis, :])
+    table["model"] = name
+    return table, {"model": name, "fit_s": fit_s, "rows_per_s": rows_per_s, "latency_us": latency}
+
+
+def choose_pipeline(data, rate, states):
+    """The pipeline's number of states, then its velocity filter, by mean validation accuracy."""
+    train, validation = data[data["split"] == "train"], data[data["split"] == "validation"]
+
+    def accuracy(**params):
+        model = make_torque_pipeline(random_state=0, sampling_period=1.0 / rate, **params)
+        pred = fit_predict(model, train, validation, FEATURES, True)[0]
+        return score(validation["driver_torque"].to_numpy(), pred, validation, rate)[
+            "accuracy"
+        ].mean()
+
+    by_states = {k: accuracy(n_states=k) for k in states}
+    k = max(by_states, key=by_states.get)
+    by_filter = {None: by_states[k], 0.02: accuracy(n_states=k, velocity_filter=0.02)}
+    return k, max(by_filter, key=by_filter.get), by_states, by_filter
+
+
+def run(seed, rate, states, duration, cache):
+    data = make_driving_protocol(
+        random_state=seed, sampling_rate=rate, duration=duration, cache=cache
+    )
+    k, velocity_filter, by_states, by_filter = choose_pipeline(data, rate, states)
+    print(
+        f"\nseed {seed}, {rate:g} Hz: pipeline validation accuracy "
+        + ", ".join(f"K={s}: {a:.2f}" for s, a in by_states.items())
+        + f" -> K={k}; velocity filter "
+        + ", ".join(f"{f}: {a:.2f}" for f, a in by_filter.items())
+        + f" -> {velocity_filter}"
+    )
+    pipeline = make_torque_pipeline(
+        n_states=k, random_state=0, velocity_filter=velocity_filter, sampling_period=1.0 / rate
+    )
+    lagged = add_lags(data, rate)
+    train, test = lagged[lagged["split"] == "train"], lagged[lagged["split"] == "test"]
+    lag_columns = [c for c in lagged.columns if "_lag" in c]
+    models = [
+        ("RidgeCV", RidgeCV(), FEATURES, False),
+        (
+            "HistGradientBoosting",
+            HistGradientBoostingRegressor(max_iter=300, random_state=0),
+            FEATURES,
+            False,
+        ),
+        (
+            "HistGradientBoosting + lags",
+            HistGradientBoostingRegressor(max_iter=300, random_state=0),
+            FEATURES + lag_columns,
+            False,
+        ),
+        ("HMMGMRRegressor K=5", HMMGMRRegressor(n_states=5, random_state=0), FEATURES, True),
+        ("HMMGMRRegressor K=8", HMMGMRRegressor(n_states=8, random_state=0), FEATURES, True),
+        (f"{PIPELINE} K={k}", pipeline, FEATURES, True),
+    ]
+    tables, costs = [], []
+    for name, model, columns, grouped in models:
+        table, cost = evaluate(name, model, train, test, rate, columns, grouped)
+        tables.append(table)
+        costs.append(cost)
+    table = pd.concat(tables, ignore_index=True)
+    ps = normalize_performance(table, weights="50/50")
+    table = table.merge(ps[["model", "recording", "performance_score"]], on=["model", "recording"])
+    table["seed"], table["rate"] = seed, rate
+    summary = summarise(table, pd.DataFrame(costs))
+    print(summary.to_string(float_format=lambda v: f"{v:.2f}"))
+    return table, summary
+
+
+def summarise(table, costs):
+    by_model = table.groupby("model", sort=False)
+    summary = pd.DataFrame(
+        {
+            "accuracy %": by_model["accuracy"].mean(),
+            "worst %": by_model["accuracy"].min(),
+            "roughness Nm/s": by_model["smoothness"].mean(),
+            "PS 50/50": by_model["performance_score"].mean(),
+        }
+    )
+    for style in STYLES:
+        rows = table[table["driver"] == style].groupby("model", sort=False)
+        summary[f"{style[:3]} acc"] = rows["accuracy"].mean()
+        summary[f"{style[:3]} worst"] = rows["accuracy"].min()
+        summary[f"{style[:3]} rough"] = rows["smoothness"].mean()
+    costs = costs.set_index("model")
+    summary["fit s"] = costs["fit_s"]
+    summary["Mrows/s"] = costs["rows_per_s"] / 1e6
+    summary["stream us"] = costs["latency_us"]
+    return summary
+
+
+def targets(summary):
+    """The pipeline against plain boosting: mean, worst and roughness, overall and per style."""
+    pipeline = next(m for m in summary.index if m.startswith(PIPELINE))
+    ours, boost = summary.loc[pipeline], summary.loc["HistGradientBoosting"]
+    checks = []
+    for prefix in ("", *[f"{s[:3]} " for s in STYLES]):
+        acc = "accuracy %" if not prefix else f"{prefix}acc"
+        worst = "worst %" if not prefix else f"{prefix}worst"
+        rough = "roughness Nm/s" if not prefix else f"{prefix}rough"
+        checks += [
+            (f"{prefix or 'all '}mean accuracy", ours[acc] >= boost[acc], ours[acc], boost[acc]),
+            (
+                f"{prefix or 'all '}worst recording",
+                ours[worst] >= boost[worst],
+                ours[worst],
+                boost[worst],
+            ),
+            (
+                f"{prefix or 'all '}roughness",
+                ours[rough] <= boost[rough],
+                ours[rough],
+                boost[rough],
+            ),
+        ]
+    return checks
+
+
+def residuals(seed, rate, duration, cache):
+    """Mean test residual per bin of the two inputs whose nonlinearity the states miss."""
+    data = make_driving_protocol(
+        random_state=seed, sampling_rate=rate, duration=duration, cache=cache
+    )
+    train, test = data[data["split"] == "train"], data[data["split"] == "test"]
+    y, fit_groups = train["driver_torque"].to_numpy(), train["recording"].to_numpy()
+    groups = test["recording"].to_numpy()
+    thesis = HMMGMRRegressor(n_states=5, random_state=0).fit(train[FEATURES], y, groups=fit_groups)
+    pipeline = make_torque_pipeline(n_states=5, random_state=0)
+    pipeline.fit(train[FEATURES], y, hmmgmr__groups=fit_groups)
+    residual = pd.DataFrame(
+        {
+            "HMMGMRRegressor K=5": test["driver_torque"]
+            - thesis.predict(test[FEATURES], groups=groups),
+            f"{PIPELINE} K=5": test["driver_torque"]
+            - pipeline.predict(test[FEATURES], groups=groups),
+        }
+    )
+    bins = {
+        "lateral_acceleration": [-5, -3, -2, -1, -0.5, 0, 0.5, 1, 2, 3, 5],
+        "steering_wheel_velocity": [-2, -0.5, -0.2, -0.1, -0.05, 0, 0.05, 0.1, 0.2, 0.5, 2],
+    }
+    for column, edges in bins.items():
+        binned = pd.cut(test[column], edges)
+        table = residual.groupby(binned, observed=True).mean()
+        table["rows"] = binned.value_counts()
+        print(f"\nmean residual (Nm) by {column}\n{table.to_string(float_format='{:.3f}'.format)}")
+    print(f"\nRMS residual (Nm)\n{np.sqrt((residual**2).mean()).to_string()}")
+    states = thesis.predict_state_proba(test[FEATURES], groups=groups).argmax(axis=1)
+    acceleration = test["lateral_acceleration"].to_numpy()
+    for k in range(thesis.n_states):
+        low, high = np.percentile(acceleration[states == k], [5, 95])
+        print(
+            f"state {k}: {np.mean(states == k):.1%} of the rows, lateral acceleration "
+            f"{low:.2f} to {high:.2f} m/s^2 (5-95 %)"
+        )
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--rates", type=float, nargs="+", default=[20.0, 100.0])
+    parser.add_argument("--states", type=int, nargs="+", default=[3, 5, 8])
+    parser.add_argument("--quick", action="store_true", help="1-minute recordings")
+    parser.add_argument("--cache", default=None, help="folder caching the simulated data")
+    parser.add_argument("--output", default=None, help="JSON file of every figure")
+    parser.add_argument("--residuals", action="store_true", help="the residual analysis only")
+    args = parser.parse_args()
+    warnings.filterwarnings("ignore", category=UserWarning)
+    duration = 60.0 if args.quick else 300.0
+    if args.residuals:
+        residuals(args.seeds[0], args.rates[0], duration, args.cache)
+        return
+    tables, missed = [], 0
+    for rate in args.rates:
+        for seed in args.seeds:
+            table, summary = run(seed, rate, args.states, duration, args.cache)
+            tables.append(table)
+            for what, ok, ours, boost in targets(summary):
+                missed += not ok
+                print(f"  [{'ok' if ok else 'MISSED'}] {what}: {ours:.2f} vs boosting {boost:.2f}")
+    if args.output:
+        with open(args.output, "w") as file:
+            json.dump(pd.concat(tables).to_dict(orient="records"), file)
+    print(f"\n{missed} target(s) missed")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,415 @@
+"""Derived inputs that the physics of a power-assisted steering system motivates, and the
+torque pipeline that puts them in front of :class:`~skhmmgmr.HMMGMRRegressor`.
+
+The driver torque balances, through the power assist, the steering system's load: the
+self-aligning torque of the front tyres, the wheel's inertia and damping, and Coulomb friction.
+Two parts of that balance are not linear in any sensed input, and a mixture of local linear
+regressions gated by Gaussians can follow them only with many states:
+
+- **friction** switches sign with the steering-wheel velocity over a few hundredths of a radian
+  per second: ``tanh(steering_wheel_velocity / friction_velocity)``;
+- **the steering load is compressed**: the boost curve of an electric power assist grows with
+  the torque (the driver's share of a large load is smaller), and the tyres' aligning torque
+  saturates with slip. Odd powers of the load's proxies (the steering-wheel angle and the lateral
+  acceleration: ``x |x|`` and ``x^3``) are the first terms of any smooth odd curve.
+
+Each derived input is an ordinary named column: :class:`SteeringFeatures` appends them to a
+data frame, so the selection framework keeps or drops them like any other feature. At high
+sampling rates the measured velocity is noisy at the scale of the friction band; a causal
+first-order filter (``velocity_filter``, within each recording) keeps that noise out of the
+friction input.
+"""
+
+import math
+import numbers
+
+import numpy as np
+import pandas as pd
+from scipy.signal import lfilter
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.pipeline import Pipeline
+from sklearn.utils.validation import check_is_fitted, validate_data
+
+from ._compat import Interval, _fit_context
+from ._docstrings import fill_shared_parameters
+from ._panel import read_row_order
+from ._sequences import as_recordings
+from .estimator import HMMGMRRegressor
+
+__all__ = ["SteeringFeatures", "make_torque_pipeline"]
+
+FRICTION_NAME = "steering_friction"
+
+
+def _power_name(column, power):
+    if power == 2:
+        return f"{column}_signed_square"
+    if power == 3:
+        return f"{column}_cube"
+    return f"{column}_signed_power{power}"
+
+
+def _column_label(column):
+    return f"x{column}" if isinstance(column, numbers.Integral) else str(column)
+
+
+@fill_shared_parameters
+class SteeringFeatures(TransformerMixin, BaseEstimator):
+    """Append the friction and load-compression inputs of a power-assisted steering system.
+
+    Nothing is learned. Without ``velocity_filter`` the transform is row by row, so it is
+    causal and streams: the same row always gives the same derived inputs. With it, the
+    friction input reads the velocity through a causal first-order filter that restarts at
+    every recording (the recordings come from ``groups`` or from the index of a panel,
+    :func:`skhmmgmr.datasets.to_panel`; without either, the rows form one recording in time
+    order). Missing values (NaN) stay missing.
+
+    Parameters
+    ----------
+    friction_velocity : float or None, default=0.1
+        Steering-wheel velocity [rad/s] over which Coulomb friction changes sign; the derived
+        input ``steering_friction`` is ``tanh(velocity / friction_velocity)``. ``None`` adds no
+        friction input.
+    friction_column : str or int, default="steering_wheel_velocity"
+        The column holding the steering-wheel velocity (a name, or a position for arrays).
+    load_columns : tuple of str or int, default=("steering_wheel_angle", "lateral_acceleration")
+        Proxies of the steering load whose odd powers are appended.
+    powers : tuple of int, default=(2, 3)
+        Powers ``p >= 2`` appended for each load column as ``sign(x) |x|^p``, named
+        ``<column>_signed_square`` (2), ``<column>_cube`` (3) or ``<column>_signed_power<p>``.
+    velocity_filter : float or None, default=None
+        Time constant [s] of a causal first-order low-pass filter on the velocity before the
+        friction input (0.02 s suits 100 Hz sensors; at 20 Hz it changes little). ``None``
+        filters nothing. Needs ``sampling_period``.
+    {sampling_period}
+
+    Attributes
+    ----------
+    n_features_in_ : int
+        Number of input columns.
+    feature_names_in_ : ndarray of shape (n_features,)
+        Input column names, when fitted on a data frame whose column names are all strings.
+
+    See Also
+    --------
+    make_torque_pipeline : These inputs in front of :class:`~skhmmgmr.HMMGMRRegressor`.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from skhmmgmr import SteeringFeatures
+    >>> X = pd.DataFrame({"steering_wheel_angle": [0.1, -0.2],
+    ...                   "steering_wheel_velocity": [0.0, 0.5],
+    ...                   "lateral_acceleration": [1.0, -2.0]})
+    >>> derived = SteeringFeatures().fit_transform(X)
+    >>> list(derived.columns[3:])  # doctest: +NORMALIZE_WHITESPACE
+    ['steering_friction', 'steering_wheel_angle_signed_square', 'steering_wheel_angle_cube',
+     'lateral_acceleration_signed_square', 'lateral_acceleration_cube']
+    >>> derived["lateral_acceleration_signed_square"].tolist()
+    [1.0, -4.0]
+    """
+
+    _parameter_constraints = {
+        "friction_velocity": [Interval(numbers.Real, 0, None, closed="neither"), None],
+        "friction_column": [str, Interval(numbers.Integral, 0, None, closed="left")],
+        "load_columns": [tuple, list],
+        "powers": [tuple, list],
+        "velocity_filter": [Interval(numbers.Real, 0, None, closed="neither"), None],
+        "sampling_period": [Interval(numbers.Real, 0, None, closed="neither"), None],
+    }
+
+    def __init__(
+        self,
+        friction_velocity=0.1,
+        friction_column="steering_wheel_velocity",
+        load_columns=("steering_wheel_angle", "lateral_acceleration"),
+        powers=(2, 3),
+        velocity_filter=None,
+        sampling_period=None,
+    ):
+        self.friction_velocity = friction_velocity
+        self.friction_column = friction_column
+        self.load_columns = load_columns
+        self.powers = powers
+        self.velocity_filter = velocity_filter
+        self.sampling_period = sampling_period
+
+    __metadata_request__fit = {"groups": True}
+    __metadata_request__transform = {"groups": True}
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, X, y=None, groups=None):
+        """Check that ``X`` holds the named columns.
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_features)
+            Sensed inputs. Columns are found by name in a data frame, by position in an array.
+        y : None
+            Ignored.
+        groups : None
+            Ignored (the recordings matter in :meth:`transform` only).
+
+        Returns
+        -------
+        self : SteeringFeatures
+            The fitted transformer.
+        """
+        self._check_powers()
+        if self.velocity_filter is not None and self.sampling_period is None:
+            raise ValueError(
+                f"velocity_filter={self.velocity_filter!r} needs sampling_period (the seconds "
+                "between two rows); got sampling_period=None."
+            )
+        validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
+        self._sources()
+        return self
+
+    def fit_transform(self, X, y=None, groups=None):
+        """Fit, then append the derived inputs (see :meth:`transform`).
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_features)
+            Sensed inputs.
+        y : None
+            Ignored.
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row, for ``velocity_filter``.
+
+        Returns
+        -------
+        X_out : DataFrame or ndarray of shape (n_samples, n_features)
+            See :meth:`transform`.
+        """
+        return self.fit(X).transform(X, groups=groups)
+
+    def transform(self, X, groups=None):
+        """Append the derived inputs.
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_features)
+            The columns seen in :meth:`fit`.
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row, for ``velocity_filter`` (the filter restarts at every
+            recording; the rows of a recording contiguous and in time order, unless the
+            index of a panel orders them). ``None``: the index's recording level if any,
+            else one recording.
+
+        Returns
+        -------
+        X_out : DataFrame or ndarray of shape (n_samples, n_features)
+            ``X`` followed by the derived inputs (``n_features`` is the number of input
+            columns plus the number of derived inputs); a data frame keeps its index (the
+            recordings of a panel) and its ``attrs``, with the units of the derived inputs
+            added to ``attrs["units"]`` when the source columns have units there.
+        """
+        check_is_fitted(self, "n_features_in_")
+        frame = X if isinstance(X, pd.DataFrame) else None
+        values = validate_data(self, X, ensure_all_finite="allow-nan", reset=False)
+        positions = self._sources()
+        derived = {}
+        if self.friction_velocity is not None:
+            velocity = values[:, positions[self.friction_column]]
+            if self.velocity_filter is not None:
+                velocity = self._filtered(velocity, X, groups)
+            derived[FRICTION_NAME] = np.tanh(velocity / self.friction_velocity)
+        for column in self.load_columns:
+            x = values[:, positions[column]]
+            for power in self.powers:
+                derived[_power_name(_column_label(column), power)] = np.sign(x) * np.abs(x) ** power
+        if frame is None:
+            return np.column_stack([values, *derived.values()])
+        out = pd.DataFrame(derived, index=frame.index)
+        out = pd.concat([frame, out], axis=1)
+        out.attrs = {**frame.attrs, "units": self._units(frame.attrs.get("units"))}
+        if out.attrs["units"] is None:
+            del out.attrs["units"]
+        return out
+
+    def get_feature_names_out(self, input_features=None):
+        """Input names followed by the derived inputs' names.
+
+        Parameters
+        ----------
+        input_features : array-like of str or None, default=None
+            Input names; ``None`` means ``feature_names_in_`` (or ``x0``, ``x1``, ...).
+
+        Returns
+        -------
+        feature_names_out : ndarray of str objects
+            Output column names.
+        """
+        check_is_fitted(self, "n_features_in_")
+        if input_features is None:
+            input_features = getattr(
+                self, "feature_names_in_", [f"x{i}" for i in range(self.n_features_in_)]
+            )
+        elif len(input_features) != self.n_features_in_:
+            raise ValueError(
+                f"input_features has {len(input_features)} names; "
+                f"{self.n_features_in_} were seen in fit."
+            )
+        return np.asarray([*input_features, *self._derived_names()], dtype=object)
+
+    def _derived_names(self):
+        names = [FRICTION_NAME] if self.friction_velocity is not None else []
+        names += [_power_name(_column_label(c), p) for c in self.load_columns for p in self.powers]
+        return names
+
+    def _filtered(self, velocity, X, groups):
+        """The velocity through the first-order filter, restarted at every recording."""
+        rows = read_row_order(X, groups)
+        ordered = rows.to_filter_order(velocity)
+        recordings = as_recordings(rows.groups, len(ordered))
+        decay = math.exp(-self.sampling_period / self.velocity_filter)
+        filtered = np.empty_like(ordered)
+        for start, stop in zip(recordings.starts, recordings.stops, strict=True):
+            segment = ordered[start:stop]
+            filtered[start:stop] = lfilter(
+                [1.0 - decay], [1.0, -decay], segment, zi=[decay * segment[0]]
+            )[0]
+        return rows.to_caller_order(filtered)
+
+    def _check_powers(self):
+        for power in self.powers:
+            if not isinstance(power, numbers.Integral) or isinstance(power, bool) or power < 2:
+                raise ValueError(
+                    f"powers must hold integers >= 2 (1 is the input itself); got {power!r} "
+                    f"in powers={self.powers!r}."
+                )
+        if len(set(self.powers)) != len(self.powers):
+            raise ValueError(f"powers={self.powers!r} repeats a power.")
+        if len(set(self.load_columns)) != len(self.load_columns):
+            raise ValueError(f"load_columns={self.load_columns!r} repeats a column.")
+
+    def _sources(self):
+        """Position of every source column, with an error naming the missing ones."""
+        needed = list(self.load_columns)
+        if self.friction_velocity is not None:
+            needed.insert(0, self.friction_column)
+        names = getattr(self, "feature_names_in_", None)
+        positions, missing = {}, []
+        for column in needed:
+            if isinstance(column, str):
+                if names is None or column not in names:
+                    missing.append(column)
+                else:
+                    positions[column] = int(np.flatnonzero(names == column)[0])
+            elif isinstance(column, numbers.Integral) and not isinstance(column, bool):
+                if column >= self.n_features_in_:
+                    missing.append(column)
+                positions[column] = int(column)
+            else:
+                raise TypeError(f"columns are names or positions; got {column!r}.")
+        if missing:
+            where = (
+                "X has no column names (pass a DataFrame, or positions for an array)"
+                if names is None
+                else f"X has columns {list(names)}"
+            )
+            raise ValueError(
+                f"SteeringFeatures needs the column(s) {missing} (friction_column / "
+                f"load_columns); {where}."
+            )
+        return positions
+
+    def _units(self, units):
+        if not isinstance(units, dict):
+            return None
+        units = dict(units)
+        if self.friction_velocity is not None:
+            units[FRICTION_NAME] = "1"
+        for column in self.load_columns:
+            unit = units.get(column)
+            for power in self.powers:
+                name = _power_name(_column_label(column), power)
+                units[name] = None if unit is None else f"({unit})^{power}"
+                if units[name] is None:
+                    del units[name]
+        return units
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.allow_nan = True
+        tags.requires_fit = True
+        return tags
+
+
+@fill_shared_parameters
+def make_torque_pipeline(
+    n_states=5,
+    *,
+    friction_velocity=0.1,
+    load_columns=("steering_wheel_angle", "lateral_acceleration"),
+    powers=(2, 3),
+    velocity_filter=None,
+    sampling_period=None,
+    **params,
+):
+    """HMM-GMR behind the steering system's derived inputs: a scikit-learn ``Pipeline``.
+
+    The pipeline is ``SteeringFeatures`` (step ``"steering_features"``) then
+    :class:`~skhmmgmr.HMMGMRRegressor` (step ``"hmmgmr"``). It takes data frames with the
+    package's column names (:data:`skhmmgmr.datasets.FEATURE_NAMES`); recordings reach the
+    regressor as ``groups`` (``hmmgmr__groups=`` in ``fit``, ``groups=`` in ``predict``, or
+    routed with metadata routing on) or in the index of a panel
+    (:func:`skhmmgmr.datasets.to_panel`). On the simulator's protocol it is more accurate than
+    a default gradient-boosting regressor and smoother (see "When to use HMM-GMR" in the user
+    guide, and ``benchmarks/bench_baselines.py``).
+
+    Parameters
+    ----------
+    n_states : int, default=5
+        Number of hidden states of the regressor; choose it on validation recordings
+        (:class:`~skhmmgmr.StateSelector`, or a ``GridSearchCV`` over ``hmmgmr__n_states``).
+    friction_velocity, load_columns, powers, velocity_filter
+        Passed to :class:`SteeringFeatures`. At 100 Hz, ``velocity_filter=0.02`` with the
+        ``sampling_period`` keeps the velocity sensor's noise out of the friction input (and
+        the recordings must then reach the transformer too: a panel index, or ``groups``
+        routed with metadata routing on).
+    {sampling_period}
+    **params
+        Any other parameter of :class:`~skhmmgmr.HMMGMRRegressor` (``random_state``,
+        ``covariance_type``, ``missing_values``...).
+
+    Returns
+    -------
+    pipeline : Pipeline
+        Unfitted; ``pipeline[-1]`` is the regressor.
+
+    Examples
+    --------
+    >>> from skhmmgmr import make_torque_pipeline
+    >>> from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping
+    >>> data = make_lane_keeping(30.0, sampling_rate=20.0, random_state=0)
+    >>> model = make_torque_pipeline(n_states=2, random_state=0)
+    >>> model = model.fit(data[list(FEATURE_NAMES)], data["driver_torque"])
+    >>> model.predict(data[list(FEATURE_NAMES)]).shape
+    (600,)
+    """
+    accepted = HMMGMRRegressor().get_params()
+    unknown = sorted(set(params) - set(accepted))
+    if unknown:
+        raise TypeError(
+            f"make_torque_pipeline got unknown parameter(s) {unknown}; it takes n_states, "
+            "friction_velocity, load_columns, powers, velocity_filter, sampling_period and "
+            "HMMGMRRegressor's "
+            f"parameters {sorted(accepted)}."
+        )
+    return Pipeline(
+        [
+            (
+                "steering_features",
+                SteeringFeatures(
+                    friction_velocity=friction_velocity,
+                    load_columns=load_columns,
+                    powers=powers,
+                    velocity_filter=velocity_filter,
+                    sampling_period=sampling_period,
+                ),
+            ),
+            ("hmmgmr", HMMGMRRegressor(n_states=n_states, **params)),
+        ]
+    )

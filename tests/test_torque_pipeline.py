@@ -1,0 +1,287 @@
+"""SteeringFeatures and make_torque_pipeline: hand-computed derived inputs, the pipeline against
+the regressor fitted on the same columns by hand, model selection over the pipeline, and the
+derived inputs as ordinary features of the selection framework."""
+
+import math
+import pickle
+
+import numpy as np
+import pandas as pd
+import pytest
+import sklearn
+from sklearn.model_selection import GridSearchCV, GroupKFold
+
+from skhmmgmr import (
+    ForwardFeatureSelector,
+    HMMGMRRegressor,
+    SteeringFeatures,
+    make_torque_pipeline,
+)
+from skhmmgmr._em import PROBABILITY_FLOOR, HMMParameters, Statistics, m_step
+from skhmmgmr._emissions import CovariancePrior, MomentStatistics
+from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping
+from skhmmgmr.metrics import make_performance_scorers
+
+pytestmark = pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+
+COLUMNS = ["steering_wheel_angle", "steering_wheel_velocity", "lateral_acceleration"]
+
+
+def _frame():
+    return pd.DataFrame(
+        [[0.1, 0.0, 1.0], [-0.2, 0.05, -2.0], [np.nan, -1.0, 0.5]],
+        columns=COLUMNS,
+        index=pd.Index(["a", "b", "c"], name="row"),
+    )
+
+
+def test_derived_inputs_equal_a_hand_computation():
+    X = _frame()
+    X.attrs["units"] = {"steering_wheel_angle": "rad", "lateral_acceleration": "m/s^2"}
+    out = SteeringFeatures().fit_transform(X)
+    assert list(out.columns) == [
+        *COLUMNS,
+        "steering_friction",
+        "steering_wheel_angle_signed_square",
+        "steering_wheel_angle_cube",
+        "lateral_acceleration_signed_square",
+        "lateral_acceleration_cube",
+    ]
+    assert out.index.equals(X.index)
+    expected = {
+        "steering_friction": [0.0, math.tanh(0.5), math.tanh(-10.0)],
+        "steering_wheel_angle_signed_square": [0.01, -0.04, np.nan],
+        "steering_wheel_angle_cube": [0.001, -0.008, np.nan],
+        "lateral_acceleration_signed_square": [1.0, -4.0, 0.25],
+        "lateral_acceleration_cube": [1.0, -8.0, 0.125],
+    }
+    for name, values in expected.items():
+        np.testing.assert_allclose(out[name], values, rtol=1e-15, err_msg=name)
+    pd.testing.assert_frame_equal(out[COLUMNS], X)
+    assert out.attrs["units"]["lateral_acceleration_cube"] == "(m/s^2)^3"
+    assert out.attrs["units"]["steering_friction"] == "1"
+    assert "units" not in X.attrs or "steering_friction" not in X.attrs["units"]
+
+
+def test_options_and_arrays():
+    X = _frame()
+    out = SteeringFeatures(
+        friction_velocity=None, load_columns=["lateral_acceleration"], powers=(4,)
+    ).fit_transform(X)
+    assert list(out.columns[3:]) == ["lateral_acceleration_signed_power4"]
+    np.testing.assert_allclose(out.iloc[:, 3], [1.0, -16.0, 0.0625])
+    values = X.to_numpy()
+    transformer = SteeringFeatures(
+        friction_velocity=0.5, friction_column=1, load_columns=(2,), powers=(2,)
+    ).fit(values)
+    array_out = transformer.transform(values)
+    np.testing.assert_allclose(array_out[:, 3], np.tanh(values[:, 1] / 0.5))
+    np.testing.assert_allclose(array_out[:, 4], values[:, 2] * np.abs(values[:, 2]))
+    assert list(transformer.get_feature_names_out()) == [
+        "x0",
+        "x1",
+        "x2",
+        "steering_friction",
+        "x2_signed_square",
+    ]
+
+
+def test_row_by_row_equals_whole_frame():
+    """Nothing crosses a row: the transform streams."""
+    X = _frame()
+    transformer = SteeringFeatures().fit(X)
+    whole = transformer.transform(X)
+    rows = pd.concat([transformer.transform(X.iloc[[i]]) for i in range(len(X))])
+    pd.testing.assert_frame_equal(rows, whole)
+
+
+@pytest.mark.parametrize(
+    ("params", "X", "message"),
+    [
+        (
+            {},
+            _frame().drop(columns="lateral_acceleration"),
+            r"needs the column\(s\) "
+            r"\['lateral_acceleration'\].*X has columns",
+        ),
+        ({}, _frame().to_numpy(), "X has no column names"),
+        ({"friction_column": 7}, _frame(), r"needs the column\(s\) \[7\]"),
+        ({"powers": (1, 2)}, _frame(), "powers must hold integers >= 2"),
+        ({"powers": (2, 2)}, _frame(), "repeats a power"),
+        ({"load_columns": ("lateral_acceleration",) * 2}, _frame(), "repeats a column"),
+        ({"friction_velocity": 0.0}, _frame(), "'friction_velocity' parameter"),
+    ],
+)
+def test_bad_input_is_named(params, X, message):
+    with pytest.raises(ValueError, match=message):
+        SteeringFeatures(**params).fit(X)
+
+
+def test_transform_checks_the_columns_seen_in_fit():
+    transformer = SteeringFeatures().fit(_frame())
+    with pytest.raises(ValueError, match="feature names"):
+        transformer.transform(_frame()[COLUMNS[::-1]])
+    with pytest.raises(ValueError, match="input_features has 2 names"):
+        transformer.get_feature_names_out(["a", "b"])
+
+
+def test_unknown_pipeline_parameter_is_named():
+    with pytest.raises(TypeError, match=r"unknown parameter\(s\) \['n_state'\]"):
+        make_torque_pipeline(n_state=3)
+
+
+@pytest.fixture(scope="module")
+def recordings():
+    frames = [
+        make_lane_keeping(
+            20.0, driver=style, sampling_rate=20.0, random_state=seed, recording=f"{style}-{seed}"
+        )
+        for seed, style in enumerate(["defensive", "aggressive", "novice", "defensive"])
+    ]
+    data = pd.concat(frames, ignore_index=True)
+    return data[list(FEATURE_NAMES)], data["driver_torque"].to_numpy(), data["recording"]
+
+
+def test_pipeline_equals_the_regressor_on_the_derived_columns(recordings):
+    X, y, groups = recordings
+    pipeline = make_torque_pipeline(n_states=2, random_state=0, n_iter=20)
+    pipeline.fit(X, y, hmmgmr__groups=groups)
+    by_hand = HMMGMRRegressor(n_states=2, random_state=0, n_iter=20)
+    derived = SteeringFeatures().fit_transform(X)
+    by_hand.fit(derived, y, groups=groups)
+    np.testing.assert_array_equal(
+        pipeline.predict(X, groups=groups), by_hand.predict(derived, groups=groups)
+    )
+    assert list(pipeline[-1].feature_names_in_) == list(derived.columns)
+    again = pickle.loads(pickle.dumps(pipeline))
+    np.testing.assert_array_equal(
+        again.predict(X, groups=groups), pipeline.predict(X, groups=groups)
+    )
+
+
+def test_grid_search_over_states_with_routed_recordings(recordings):
+    X, y, groups = recordings
+    scorers = make_performance_scorers(["50/50"], sampling_period=0.05)
+    with sklearn.config_context(enable_metadata_routing=True):
+        search = GridSearchCV(
+            make_torque_pipeline(random_state=0, n_iter=10),
+            {"hmmgmr__n_states": [1, 2]},
+            cv=GroupKFold(n_splits=2),
+            scoring=scorers,
+            refit="neg_performance_50/50",
+        ).fit(X, y, groups=groups)
+    assert search.best_params_["hmmgmr__n_states"] in (1, 2)
+    # each split's score equals the pipeline fitted and scored by hand on that split
+    for k in (1, 2):
+        by_hand = []
+        for train, test in GroupKFold(n_splits=2).split(X, y, groups):
+            model = make_torque_pipeline(n_states=k, random_state=0, n_iter=10)
+            model.fit(X.iloc[train], y[train], hmmgmr__groups=groups.iloc[train])
+            scorer = scorers["neg_performance_50/50"]
+            with sklearn.config_context(enable_metadata_routing=True):
+                by_hand.append(scorer(model, X.iloc[test], y[test], groups=groups.iloc[test]))
+        index = search.cv_results_["param_hmmgmr__n_states"].tolist().index(k)
+        np.testing.assert_allclose(
+            search.cv_results_["mean_test_neg_performance_50/50"][index], np.mean(by_hand)
+        )
+
+
+def test_selection_framework_keeps_or_drops_derived_inputs():
+    """A torque made of friction only: the forward selection picks the friction input first."""
+    rng = np.random.default_rng(0)
+    n, groups = 1200, np.repeat(["r0", "r1", "r2", "r3"], 300)
+    t = np.arange(n) * 0.05
+    X = pd.DataFrame(
+        np.column_stack([np.sin(f * t + rng.uniform(0, 6)) for f in (0.5, 1.3, 0.8)]) * 0.3,
+        columns=COLUMNS,
+    )
+    y = 0.3 * np.tanh(X["steering_wheel_velocity"].to_numpy() / 0.1)
+    y += 0.01 * rng.normal(size=n)
+    derived = SteeringFeatures().fit_transform(X)
+    selector = ForwardFeatureSelector(
+        HMMGMRRegressor(n_states=1),
+        max_features=1,
+        accuracy_weight=1.0,
+        smoothness_weight=0.0,
+        sampling_period=0.05,
+        cv=2,
+    ).fit(derived, y, groups=groups)
+    assert list(selector.get_feature_names_out()) == ["steering_friction"]
+
+
+def test_zero_probabilities_are_floored_and_keep_recordings_possible():
+    """Counts that make a start or transition probability exactly zero give the floor."""
+    n_states, n_features = 2, 1
+    moments = MomentStatistics(
+        np.ones(n_states),
+        np.zeros((n_states, n_features)),
+        np.ones((n_states, n_features, n_features)),
+        np.zeros(n_features),
+    )
+    stats = Statistics(0.0, np.array([3.0, 0.0]), np.array([[5.0, 0.0], [1.0, 4.0]]), moments)
+    previous = HMMParameters.gaussian(
+        np.full(2, 0.5), np.full((2, 2), 0.5), np.zeros((2, 1)), np.ones((2, 1, 1))
+    )
+    params = m_step(stats, previous, prior=CovariancePrior(1e-6))
+    np.testing.assert_allclose(params.startprob, [1.0, PROBABILITY_FLOOR], rtol=1e-15)
+    np.testing.assert_allclose(params.transmat, [[1.0, PROBABILITY_FLOOR], [0.2, 0.8]], rtol=1e-15)
+    assert params.transmat[0, 1] > 0.0 and params.startprob[1] > 0.0
+
+
+def _plain_filter(values, decay):
+    out, state = [], values[0]
+    for value in values:
+        state = decay * state + (1.0 - decay) * value
+        out.append(state)
+    return np.array(out)
+
+
+def test_velocity_filter_restarts_at_every_recording():
+    rng = np.random.default_rng(1)
+    X = pd.DataFrame(rng.normal(size=(30, 3)), columns=COLUMNS)
+    groups = np.repeat(["r0", "r1", "r2"], 10)
+    transformer = SteeringFeatures(velocity_filter=0.02, sampling_period=0.01)
+    out = transformer.fit_transform(X, groups=groups)
+    decay = math.exp(-0.5)
+    expected = np.concatenate(
+        [
+            _plain_filter(X["steering_wheel_velocity"].to_numpy()[g == groups], decay)
+            for g in ("r0", "r1", "r2")
+        ]
+    )
+    np.testing.assert_allclose(out["steering_friction"], np.tanh(expected / 0.1), rtol=1e-13)
+    # the load inputs stay row by row
+    np.testing.assert_allclose(
+        out["lateral_acceleration_cube"], X["lateral_acceleration"].to_numpy() ** 3, rtol=1e-14
+    )
+    # a shuffled panel (recordings and time in the index) gives the same rows back
+    panel = X.set_index(
+        [
+            pd.Index(groups, name="recording"),
+            pd.Index(np.tile(np.arange(10) * 0.01, 3), name="time"),
+        ]
+    )
+    shuffled = panel.sample(frac=1.0, random_state=0)
+    from_panel = transformer.transform(shuffled)
+    got = from_panel["steering_friction"].sort_index()
+    expected_panel = out.set_index(panel.index)["steering_friction"].sort_index()
+    assert got.index.equals(expected_panel.index)
+    np.testing.assert_allclose(got.to_numpy(), expected_panel.to_numpy(), rtol=1e-13)
+
+
+def test_velocity_filter_needs_the_sampling_period():
+    with pytest.raises(ValueError, match="velocity_filter=0.02 needs sampling_period"):
+        SteeringFeatures(velocity_filter=0.02).fit(_frame())
+
+
+def test_recordings_reach_the_filter_through_routing(recordings):
+    X, y, groups = recordings
+    params = {"velocity_filter": 0.1, "sampling_period": 0.05, "n_iter": 5, "random_state": 0}
+    with sklearn.config_context(enable_metadata_routing=True):
+        pipeline = make_torque_pipeline(n_states=2, **params).fit(X, y, groups=groups)
+        routed = pipeline.predict(X, groups=groups)
+    derived = SteeringFeatures(velocity_filter=0.1, sampling_period=0.05).fit_transform(
+        X, groups=groups
+    )
+    by_hand = HMMGMRRegressor(n_states=2, n_iter=5, random_state=0).fit(derived, y, groups=groups)
+    np.testing.assert_array_equal(routed, by_hand.predict(derived, groups=groups))
