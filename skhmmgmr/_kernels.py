@@ -203,7 +203,9 @@ def pairwise_products(columns, first, rows, cols, out):
 
 # Below this, exp() of a log-density difference is subnormal (exp(-708.4) is the smallest
 # normal double): such a frame is set to zero, which changes no sum it enters (every row also
-# holds a frame of exactly one) and avoids the slow subnormal path of exp.
+# holds a frame of exactly one) and avoids the slow subnormal path of exp. It can make a row
+# impossible only together with an exact-zero transition, which the M-step rules out
+# (``_em.PROBABILITY_FLOOR``).
 UNDERFLOW = -708.0
 
 
