@@ -173,7 +173,7 @@ class AdaptMixin:
             return self
         rows = read_row_order(X, groups, time)
         X, y, groups = rows.to_filter_order(X), rows.to_filter_order(y), rows.groups
-        allow_nan = self.missing_values == "marginalize"
+        allow_nan = self.missing_values != "error"
         check_target_finite(y, groups, allow_nan=allow_nan)
         X, y = validate_joint(
             self,
@@ -208,6 +208,7 @@ class AdaptMixin:
             scaling,
             scalar_output=model.scalar_output,
             feature_names=model.feature_names,
+            stale_noise=model.stale_noise,
         )
         jacobian = scaling.log_jacobian(observed_counts(X, Y))
         self.n_iter_, self.converged_ = n_done, converged

@@ -122,6 +122,10 @@ class FittedHMMGMR:
         Whether predictions are 1-D (the model was fitted on a 1-D target).
     feature_names : tuple of str, default=None
         Input names, when the model was fitted on named columns.
+    stale_noise : StaleInputNoise, default=None
+        The inputs' variograms in standardised units, by which a model fitted with
+        ``missing_values="carry_forward"`` reads a missing input through its last observed
+        value (:mod:`skhmmgmr._stale_inputs`); None otherwise.
 
     Attributes
     ----------
@@ -153,6 +157,7 @@ class FittedHMMGMR:
     standardization: Standardization
     scalar_output: bool = True
     feature_names: tuple = None
+    stale_noise: object = None
     emissions: object = field(init=False, repr=False, compare=False)
     gmr: object = field(init=False, repr=False, compare=False)
 
@@ -176,6 +181,8 @@ class FittedHMMGMR:
             if len(names) != self.n_inputs:
                 raise ValueError(f"{len(names)} feature names for {self.n_inputs} inputs")
             object.__setattr__(self, "feature_names", names)
+        if self.stale_noise is not None:
+            object.__setattr__(self, "stale_noise", self.stale_noise.frozen(self.n_inputs))
         # The model owns read-only copies: nobody can change it after the fact.
         data_emissions = make_emissions(
             self.data_emissions.covariance_type,

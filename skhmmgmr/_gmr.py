@@ -57,14 +57,16 @@ def condition_on_inputs(startprob, transmat, emissions, n_inputs):
     return GMRParameters(startprob, transmat, gating, coef, intercept, conditional)
 
 
-def filter_state_probabilities(X, recordings, params, chunk_size=None):
+def filter_state_probabilities(X, recordings, params, chunk_size=None, stale_noise=None):
     """Filtered state probabilities ``alpha_t,k`` given the inputs up to ``t``.
 
     The recursion restarts from the start probabilities at the first row of every recording.
     The input densities are computed chunk by chunk (all states in one product per chunk).
     When no state that the transitions allow explains a row (every product underflows), the
     recursion restarts at that row from the input densities alone instead of producing NaN.
-    A row with missing inputs (NaN) takes the densities of its observed inputs.
+    A row with missing inputs (NaN) takes the densities of its observed inputs (and of the
+    last observed values of the missing ones, given their ``stale_noise``,
+    :mod:`skhmmgmr._stale_inputs`).
     """
     n_samples = X.shape[0]
     n_states, n_inputs = params.n_states, params.gating.n_dims
@@ -74,7 +76,7 @@ def filter_state_probabilities(X, recordings, params, chunk_size=None):
     for start in range(0, n_samples, step):
         rows = slice(start, start + step)
         density.frames(augmented_columns(X[rows]), frames[rows], top[rows])
-    missing = MissingRows.of(X.T)
+    missing = MissingRows.of(X.T, stale=_stale(stale_noise, recordings))
     if missing is not None:
         missing.overwrite(params.gating, 0, n_samples, frames, top)
     alpha = np.empty_like(frames)
@@ -89,6 +91,10 @@ def filter_state_probabilities(X, recordings, params, chunk_size=None):
         restart=True,
     )
     return alpha
+
+
+def _stale(noise, recordings):
+    return None if noise is None else (noise, recordings.starts, recordings.stops)
 
 
 def conditional_means(X, params):
@@ -112,14 +118,15 @@ def _sum_over_states(alpha, values):
     return out
 
 
-def gmr_estimates(X, alpha, params, return_std=False):
+def gmr_estimates(X, alpha, params, return_std=False, recordings=None, stale_noise=None):
     """Estimates of the outputs (and their std) given the state probabilities ``alpha``.
 
     The conditional means of every state given the inputs of each row (given the observed
-    ones in a row with missing inputs), mixed by :func:`mix_estimates`.
+    ones in a row with missing inputs, and the last observed values of the missing ones given
+    their ``stale_noise`` in ``recordings``), mixed by :func:`mix_estimates`.
     """
     state_means = conditional_means(X, params)
-    missing = MissingRows.of(X.T)
+    missing = MissingRows.of(X.T, stale=_stale(stale_noise, recordings))
     if missing is None:
         return mix_estimates(alpha, state_means, params, return_std=return_std)
     state_means[missing.rows], added = missing.outputs(params)

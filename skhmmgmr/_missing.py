@@ -64,9 +64,16 @@ class RowConditionals:
     groups: list
 
 
-def condition_rows(emissions, x, missing, shift=None):
+def condition_rows(emissions, x, missing, shift=None, stale=None):
     """:class:`RowConditionals` of rows ``x`` (n, D) about ``shift``, zero where ``missing``
-    (bool, n x D), under every state of ``emissions``."""
+    (bool, n x D), under every state of ``emissions``.
+
+    ``stale``: ``(carried, precisions)``, both (n, D), for values read through their last
+    observed value (:mod:`skhmmgmr._stale_inputs`): a missing column with a positive precision
+    ``1 / v`` is observed through ``carried`` (about ``shift``) with noise variance ``v``; its
+    block of the precision gains ``1 / v`` on the diagonal and its completion is the Kalman
+    update of the conditional mean by the carried value.
+    """
     precisions_chol = emissions.precisions_chol  # P, with S^-1 = P P^T
     centres = emissions.means if shift is None else emissions.means - shift
     deltas = np.where(missing, 0.0, x[np.newaxis] - centres[:, np.newaxis, :])  # d = x - mu
@@ -75,38 +82,53 @@ def condition_rows(emissions, x, missing, shift=None):
     precisions = precisions_chol @ precisions_chol.transpose(0, 2, 1)
     n_missing = missing.sum(axis=1)
     log_det_missing = np.zeros(deltas.shape[:2])
+    n_seen = missing.shape[1] - n_missing  # observed values, carried ones included
+    if stale is not None:
+        carried, weights = stale  # weights: the carried values' precisions 1 / v
+        # z - mu where a value is carried; L d - diag(1/v) (z - mu) replaces L d below.
+        stale_deltas = np.where(weights > 0, carried[np.newaxis] - centres[:, np.newaxis], 0.0)
+        gradients -= weights * stale_deltas
+        n_seen = n_seen + np.count_nonzero(weights, axis=1)
     groups = []
     for r in np.unique(n_missing[n_missing > 0]):
         rows = np.flatnonzero(n_missing == r)
         columns = np.nonzero(missing[rows])[1].reshape(-1, r)
         block = precisions[:, columns[:, :, np.newaxis], columns[:, np.newaxis, :]]
+        if stale is not None:
+            added = weights[rows[:, np.newaxis], columns]  # (n_r, r)
+            block = block + added[..., np.newaxis] * np.eye(r)
+            with np.errstate(divide="ignore"):
+                log_noise = np.where(added > 0, np.log(added), 0.0).sum(axis=1)
+            log_det_missing[:, rows] -= log_noise  # + sum log v of the carried values
         if r == 1:  # the most common group: no LAPACK call per row
-            covariances, log_det_missing[:, rows] = 1.0 / block, np.log(block[..., 0, 0])
+            covariances = 1.0 / block
+            log_det_missing[:, rows] += np.log(block[..., 0, 0])
         else:
             covariances = np.linalg.inv(block)  # (L_mm)^-1, the conditional covariance
-            log_det_missing[:, rows] = np.linalg.slogdet(block)[1]
+            log_det_missing[:, rows] += np.linalg.slogdet(block)[1]
         shifts = covariances @ gradients[:, rows[:, np.newaxis], columns][..., np.newaxis]
         # x_hat_m - mu_m = -(L_mm)^-1 L_mo d_o, and L_mo d_o = (L d)_m while d_m = 0
         deltas[:, rows[:, np.newaxis], columns] = -shifts[..., 0]
         groups.append((rows, columns, covariances))
     distances = np.square(deltas @ precisions_chol).sum(axis=2)  # completed: x_o's own
+    if stale is not None:  # and the carried values' distance to the completion
+        distances += np.sum(weights * np.square(stale_deltas - deltas), axis=2)
     log_det = np.log(np.diagonal(precisions_chol, axis1=1, axis2=2)).sum(axis=1)
-    log_prob = log_det[:, np.newaxis] - 0.5 * (
-        distances + log_det_missing + (missing.shape[1] - n_missing) * LOG_2PI
-    )
+    log_prob = log_det[:, np.newaxis] - 0.5 * (distances + log_det_missing + n_seen * LOG_2PI)
     # From x_hat - mu to x_hat - x: x is zero in the missing columns, d in the observed ones.
     deltas = np.where(missing, deltas + centres[:, np.newaxis, :], 0.0)
     return RowConditionals(log_prob.T, deltas, groups)
 
 
-def gmr_given_observed(params, x, missing):
+def gmr_given_observed(params, x, missing, stale=None):
     """GMR of standardised input rows ``x`` (n, F), zero where ``missing``, given their
-    observed inputs: the gating log-densities (n, K), every state's output means and the
-    variances added to its conditional variances, both (n, K, n_outputs).
+    observed inputs (and carried values, ``stale``: see :func:`condition_rows`): the gating
+    log-densities (n, K), every state's output means and the variances added to its
+    conditional variances, both (n, K, n_outputs).
 
     ``params`` is a :class:`~skhmmgmr._gmr.GMRParameters`.
     """
-    conditionals = condition_rows(params.gating, x, missing)
+    conditionals = condition_rows(params.gating, x, missing, stale=stale)
     completed = conditionals.deltas + x
     means = completed @ params.coef.transpose(0, 2, 1) + params.intercept[:, np.newaxis, :]
     added = np.zeros_like(means)
@@ -121,7 +143,9 @@ class MissingRows:
 
     ``values`` are the engine's augmented columns without their row of ones (about ``shift``)
     or the transposed rows of standardised inputs. With ``fill=True`` the missing values are
-    set to zero in place (see the module docstring).
+    set to zero in place (see the module docstring). ``stale``: ``(noise, starts, stops)``,
+    a :class:`~skhmmgmr._stale_inputs.StaleInputNoise` of the first columns and the bounds of
+    the recordings, to read missing values through their last observed value.
 
     Attributes
     ----------
@@ -131,38 +155,48 @@ class MissingRows:
         Their missing columns.
     """
 
-    def __init__(self, values, shift=None, *, fill=False):
+    def __init__(self, values, shift=None, *, fill=False, stale=None):
         nan = np.isnan(values)
         self.rows = np.flatnonzero(nan.any(axis=0))
         self.missing = np.ascontiguousarray(nan[:, self.rows].T)
+        self.stale = None
+        if stale is not None:
+            noise, starts, stops = stale
+            carried = np.zeros(self.missing.shape)
+            precisions = np.zeros(self.missing.shape)
+            n_read = noise.variances.shape[0]
+            read = noise.read(values[:n_read].T, starts, stops)
+            carried[:, :n_read], precisions[:, :n_read] = (part[self.rows] for part in read)
+            self.stale = (carried, precisions)
         if fill:
             values[nan] = 0.0
         self.values, self.shift = values, shift
 
     @classmethod
-    def of(cls, values, shift=None, *, fill=False):
+    def of(cls, values, shift=None, *, fill=False, stale=None):
         """:class:`MissingRows` of ``values``, or None when no value is missing."""
         if not np.isnan(np.sum(values)):
             return None
-        missing = cls(values, shift, fill=fill)
+        missing = cls(values, shift, fill=fill, stale=stale)
         return missing if missing.rows.size else None
 
     def _chunks(self, start, stop):
-        """``(rows - start, x, missing)`` of the rows ``start:stop`` with a missing value, in
-        chunks; ``x`` (n, D) holds zeros where values are missing."""
+        """``(rows - start, x, missing, stale)`` of the rows ``start:stop`` with a missing value,
+        in chunks; ``x`` (n, D) holds zeros where values are missing."""
         lo, hi = np.searchsorted(self.rows, [start, stop])
         for first in range(lo, hi, CHUNK_ROWS):
             part = slice(first, min(first + CHUNK_ROWS, hi))
             x = self.values[:, self.rows[part]].T
             x[self.missing[part]] = 0.0
-            yield self.rows[part] - start, x, self.missing[part]
+            stale = None if self.stale is None else tuple(a[part] for a in self.stale)
+            yield self.rows[part] - start, x, self.missing[part], stale
 
     def overwrite(self, emissions, start, stop, frames, top):
         """Write the marginal densities of the rows ``start:stop`` that miss a value into
         ``frames`` and ``top`` (those of rows ``start:stop``: the densities scaled to a maximum
         of one per row, and the logarithms of the scales)."""
-        for rows, x, missing in self._chunks(start, stop):
-            log_prob = condition_rows(emissions, x, missing, self.shift).log_prob
+        for rows, x, missing, stale in self._chunks(start, stop):
+            log_prob = condition_rows(emissions, x, missing, self.shift, stale).log_prob
             top[rows] = log_prob.max(axis=1)
             frames[rows] = np.exp(log_prob - top[rows, np.newaxis])
 
@@ -172,8 +206,8 @@ class MissingRows:
         n_states, n_dims = emissions.n_states, self.values.shape[0]
         second = np.zeros((n_states, n_dims, n_dims))
         first = np.zeros((n_states, n_dims))
-        for rows, x, missing in self._chunks(start, stop):
-            conditionals = condition_rows(emissions, x, missing, self.shift)
+        for rows, x, missing, stale in self._chunks(start, stop):
+            conditionals = condition_rows(emissions, x, missing, self.shift, stale)
             weights = posteriors[:, rows]
             weighted = conditionals.deltas * weights[:, :, np.newaxis]
             first += weighted.sum(axis=1)
@@ -203,9 +237,9 @@ class MissingRows:
         means = np.empty((self.rows.size, n_states, n_outputs))
         added = np.empty_like(means)
         first = 0
-        for rows, x, missing in self._chunks(0, self.values.shape[1]):
+        for rows, x, missing, stale in self._chunks(0, self.values.shape[1]):
             part = slice(first, first + rows.size)
-            _, means[part], added[part] = gmr_given_observed(params, x, missing)
+            _, means[part], added[part] = gmr_given_observed(params, x, missing, stale)
             first += rows.size
         return means, added
 

@@ -146,6 +146,7 @@ class OnlineMeans:
             model.standardization,
             scalar_output=model.scalar_output,
             feature_names=model.feature_names,
+            stale_noise=model.stale_noise,
         )
 
     def gmr(self):

@@ -240,6 +240,8 @@ def command_select(args):
             time=args.time,
             target=args.target,
             features=args.features,
+            sampling_rate=args.sampling_rate,
+            max_gap=args.max_gap,
         )
     except ValueError as exc:
         raise CommandError(f"{path}: {exc}") from exc
@@ -431,6 +433,10 @@ def build_parser():
     _add_data_options(select)
     select.add_argument("--split", default=SPLIT, help="split column")
     select.add_argument("--features", nargs="+", help="candidate features (default: all numeric)")
+    text = "check that every recording is sampled at this rate [Hz], or with --max-gap resample"
+    select.add_argument("--sampling-rate", type=float, help=text + " to it (default: neither)")
+    text = "gaps up to this many seconds are interpolated, a longer one splits its recording"
+    select.add_argument("--max-gap", type=float, help=text + " (default: no resampling)")
     for part in ("validation", "test"):
         help_text = f"share of the recordings drawn for {part} when there is no split column"
         select.add_argument(f"--{part}-fraction", type=float, default=0.25, help=help_text)

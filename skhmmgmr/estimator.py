@@ -22,6 +22,7 @@ from ._gmr import filter_state_probabilities, gmr_estimates
 from ._missing import observed_counts
 from ._panel import read_row_order
 from ._sequences import as_recordings
+from ._stale_inputs import MISSING_VALUES, learn_stale_noise, stale_noise_for
 from ._validation import (
     check_column_scales,
     check_enough_rows,
@@ -29,6 +30,7 @@ from ._validation import (
     check_target_finite,
     column_names_of,
     validate_joint,
+    warn_if_one_long_recording,
 )
 
 
@@ -77,15 +79,18 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         works on standardised columns (zero mean, unit variance), so the value is relative to
         each column's variance: constant, collinear and badly scaled columns are all handled
         by the same regularisation. ``0`` gives maximum likelihood.
-    missing_values : {"error", "marginalize"}, default="error"
+    missing_values : {"error", "marginalize", "carry_forward"}, default="error"
         What a NaN in ``X`` (or in ``y`` for ``fit``) means. "error": it is refused, naming
         its column and recording. "marginalize": a missing value; a row takes part through
         its observed columns only (missing-data EM: the states' marginal densities of those
         columns, and expected statistics of the missing ones; the k-means initialisation
         sees missing values as their column's mean), and prediction conditions on the
         observed inputs of each row (a row with none passes the state probabilities through
-        the transition matrix). Infinities are refused either way. See the user guide,
-        "Missing inputs".
+        the transition matrix). "carry_forward": fitted the same way, and ``fit`` also learns
+        every input's variogram; prediction reads a missing input through its last observed
+        value in the recording, as a noisy observation whose variance is the variogram at its
+        age (marginalised when there is none, or older than 128 samples). Infinities are
+        refused either way. See the user guide, "Missing inputs".
     random_state : int, RandomState instance or None, default=None
         Seed of the initialisation, for reproducible fits.
     verbose : int, default=0
@@ -175,7 +180,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         "n_init": [Interval(Integral, 1, None, closed="left")],
         "init_params": [StrOptions(set(INIT_METHODS))],
         "reg_covar": [Interval(Real, 0, None, closed="left")],
-        "missing_values": [StrOptions({"error", "marginalize"})],
+        "missing_values": [StrOptions(set(MISSING_VALUES))],
         "random_state": ["random_state"],
         "verbose": ["verbose"],
     }
@@ -244,7 +249,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
             rows.groups,
             rows.time,
         )
-        allow_nan = self.missing_values == "marginalize"
+        allow_nan = self.missing_values != "error"
         check_target_finite(y, groups, allow_nan=allow_nan)
         X, y = validate_joint(self, X, y, allow_nan=allow_nan)
         Y = y.reshape(-1, 1) if y.ndim == 1 else y
@@ -262,6 +267,8 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         # The engine's own layout, standardised in place: the only copy of the data it makes.
         standardized, center, scale = Columns.standardized(X, Y)
         check_column_scales(scale, [*names, *output_names])
+        # The variograms need the missing values, which the engine overwrites.
+        stale_noise = learn_stale_noise(self.missing_values, standardized, X.shape[1], recordings)
         result = self._baum_welch(standardized, recordings)
         if not result.converged:
             warnings.warn(
@@ -278,6 +285,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
             Standardization(center, scale, X.shape[1]),
             scalar_output=y.ndim == 1,
             feature_names=getattr(self, "feature_names_in_", None),
+            stale_noise=stale_noise,
         )
         jacobian = self.model_.standardization.log_jacobian(observed_counts(X, Y))
         self.n_iter_ = result.n_iter
@@ -342,24 +350,11 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
             self, rows.to_filter_order(X), reset=False, ensure_all_finite=False, dtype=float
         )
         if rows.groups is None:
-            self._warn_if_one_long_recording(X.shape[0])
+            warn_if_one_long_recording(self, X.shape[0])
         recordings = as_recordings(rows.groups, X.shape[0], time=rows.time)
-        names, allow_nan = column_names_of(self, X.shape[1]), self.missing_values == "marginalize"
+        names, allow_nan = column_names_of(self, X.shape[1]), self.missing_values != "error"
         check_finite(X, name="X", column_names=names, recordings=recordings, allow_nan=allow_nan)
         return self.model_.standardization.inputs(X), recordings, rows
-
-    def _warn_if_one_long_recording(self, n_samples):
-        longest = getattr(self, "longest_recording_", None)
-        if longest is not None and n_samples > longest:
-            warnings.warn(
-                f"{n_samples} rows without groups are filtered as ONE recording, longer than "
-                f"the longest training recording ({longest} rows). If they hold several "
-                "recordings, pass groups=<recording id per row>, or give X a pandas index with "
-                "a 'recording' level (skhmmgmr.datasets.to_panel), so that the filter restarts "
-                "at every recording.",
-                UserWarning,
-                stacklevel=3,
-            )
 
     def predict_state_proba(self, X, groups=None, time=None):
         """Filtered state probabilities ``alpha_t,k`` given the inputs up to each row.
@@ -378,7 +373,10 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
             Rows sum to one.
         """
         standardized, recordings, rows = self._validate_inputs(X, groups, time)
-        alpha = filter_state_probabilities(standardized, recordings, self.model_.gmr)
+        noise = stale_noise_for(self.model_, self.missing_values)
+        alpha = filter_state_probabilities(
+            standardized, recordings, self.model_.gmr, stale_noise=noise
+        )
         return rows.to_caller_order(alpha)
 
     def predict(self, X, groups=None, time=None, return_std=False):
@@ -402,9 +400,11 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         y_std : ndarray of the same shape, only when ``return_std`` is True
         """
         standardized, recordings, rows = self._validate_inputs(X, groups, time)
-        model = self.model_
-        alpha = filter_state_probabilities(standardized, recordings, model.gmr)
-        estimate, std = gmr_estimates(standardized, alpha, model.gmr, return_std=return_std)
+        model, noise = self.model_, stale_noise_for(self.model_, self.missing_values)
+        alpha = filter_state_probabilities(standardized, recordings, model.gmr, stale_noise=noise)
+        estimate, std = gmr_estimates(
+            standardized, alpha, model.gmr, return_std, recordings, stale_noise=noise
+        )
         estimate = model.standardization.outputs(estimate)
         estimate = rows.to_caller_order(estimate[:, 0] if model.scalar_output else estimate)
         if not return_std:
@@ -462,7 +462,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         """
         check_is_fitted(self)
         rows = read_row_order(X, groups)
-        allow_nan = self.missing_values == "marginalize"
+        allow_nan = self.missing_values != "error"
         X, y = validate_joint(
             self,
             rows.to_filter_order(X),
@@ -473,7 +473,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         )
         Y = y.reshape(-1, 1) if y.ndim == 1 else y
         if rows.groups is None:
-            self._warn_if_one_long_recording(X.shape[0])
+            warn_if_one_long_recording(self, X.shape[0])
         recordings = as_recordings(rows.groups, X.shape[0], time=rows.time)
         scaling = self.model_.standardization
         log_likelihood = score_hmm(scaling.joint(X, Y), recordings, self.model_.hmm_parameters())
@@ -496,5 +496,5 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         tags = super().__sklearn_tags__()
         tags.target_tags.required = True
         tags.target_tags.multi_output = True
-        tags.input_tags.allow_nan = self.missing_values == "marginalize"
+        tags.input_tags.allow_nan = self.missing_values != "error"
         return tags

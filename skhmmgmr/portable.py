@@ -30,6 +30,10 @@ The file is one JSON object (format ``"skhmmgmr-hmm-gmr"``, ``format_version`` 1
     the estimator's ``means_`` and ``covars_``, from which :func:`read_model` restores it.
     ``covariance_type`` (optional, default ``"full"``): ``"tied"`` when every state shares
     one covariance (then all K covariances are equal).
+``stale_inputs`` (optional; models fitted with ``missing_values="carry_forward"``)
+    ``lags`` (L increasing sample counts) and ``variances`` (F x L, standardised units,
+    ``null`` where unknown): every input's variogram, the variance of its value ``lag``
+    samples earlier about its current one (:mod:`skhmmgmr._stale_inputs`).
 ``estimator_params``, ``fit_info``
     Hyperparameters (``get_params()``) and, optionally, ``log_likelihood``,
     ``log_likelihood_history``, ``penalized_log_likelihood``,
@@ -39,11 +43,15 @@ The filter (METHOD.md section 2): ``alpha_1 ∝ pi * b(z_1)``, ``alpha_t ∝ (al
 b(z_t)``, estimate ``sum_k alpha_t,k m_k(z_t)``, where ``b_k`` is the Gaussian density of the
 input marginal; densities are taken relative to the largest one, and if every product
 ``prior * b`` is zero the recursion restarts from ``b`` alone. With
-``estimator_params["missing_values"] == "marginalize"`` NaN inputs are missing values: ``b_k``
-is then the density of the observed inputs ``o`` alone (1 if none), and ``m_k`` the
-regression applied to ``z`` completed by ``z_m = mu_m - (P_mm)^-1 P_mo (z_o - mu_o)``, with
-the input precision ``P = U_k U_k^T``; the conditional covariance gains
-``coef_m (P_mm)^-1 coef_m^T``.
+``estimator_params["missing_values"]`` equal to ``"marginalize"`` NaN inputs are missing
+values: ``b_k`` is then the density of the observed inputs ``o`` alone (1 if none), and
+``m_k`` the regression applied to ``z`` completed by ``z_m = mu_m - (P_mm)^-1 P_mo (z_o -
+mu_o)``, with the input precision ``P = U_k U_k^T``; the conditional covariance gains
+``coef_m (P_mm)^-1 coef_m^T``. With ``"carry_forward"`` a missing input whose last observed
+value ``c`` in the recording is ``g`` samples old (``0 < g <= max(lags)``) is observed through
+``c`` with noise variance ``v = variances`` interpolated linearly at ``g``: ``P_mm`` becomes
+``P_mm + diag(1 / v)`` in the formulas above, ``z_m = mu_m + (P_mm + diag(1/v))^-1 (diag(1/v)
+(c - mu_m) - P_mo (z_o - mu_o))``, and ``b_k`` gains the density of ``c`` given ``z_o``.
 """
 
 import json
@@ -56,6 +64,7 @@ import numpy as np
 from ._emissions import make_emissions
 from ._fitted import FittedHMMGMR, Standardization
 from ._gaussian import NotPositiveDefiniteError
+from ._stale_inputs import StaleInputNoise
 from ._version import __version__
 
 FORMAT_NAME = "skhmmgmr-hmm-gmr"
@@ -133,6 +142,12 @@ def to_dict(model, *, estimator_params=None, fit_info=None, output_names=None):
         "estimator_params": estimator_params,
         "fit_info": dict(fit_info or {}),
     }
+    if model.stale_noise is not None:
+        variances = model.stale_noise.variances
+        data["stale_inputs"] = {
+            "lags": model.stale_noise.lags,
+            "variances": np.where(np.isfinite(variances), variances, None),
+        }
     return _to_plain(data, "")
 
 
@@ -241,6 +256,7 @@ def read_model(data):
             standardization,
             scalar_output=target_ndim == 1,
             feature_names=feature_names if named else None,
+            stale_noise=_stale_noise(data.get("stale_inputs")),
         )
     except (NotPositiveDefiniteError, np.linalg.LinAlgError) as exc:
         raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
@@ -255,6 +271,19 @@ def read_model(data):
         raise ValueError("'fit_info' must be a JSON object")
     fit_info = {key: fit_info[key] for key in FIT_INFO_KEYS if fit_info.get(key) is not None}
     return PortableModel(model, params, fit_info)
+
+
+def _stale_noise(block):
+    if block is None:
+        return None
+    try:
+        lags = np.asarray(block["lags"], dtype=np.int64)
+        variances = np.array(block["variances"], dtype=float)  # null -> NaN
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(
+            "'stale_inputs' must hold 'lags' (integers) and 'variances' (numbers or null)"
+        ) from exc
+    return StaleInputNoise(lags, np.where(np.isnan(variances), np.inf, variances))
 
 
 def _joint_emissions(block, joint):

@@ -27,6 +27,7 @@ from ._fitted import FittedHMMGMR
 from ._missing import gmr_given_observed
 from ._panel import read_row_order
 from ._sequences import as_recordings
+from ._stale_inputs import MISSING_VALUES, carried_inputs
 from ._stream_adaptation import OnlineMeans, check_adaptation
 from ._stream_inputs import as_batch, as_row
 
@@ -56,12 +57,15 @@ class FilterStream:
         A sample whose input log-density, in the standardised units the model works in, is below
         this value in every state is an outlier (see Notes). The default flags exactly the
         samples whose densities all underflow to zero in double precision.
-    missing_values : {"error", "marginalize"}, default=None
+    missing_values : {"error", "marginalize", "carry_forward"}, default=None
         What a NaN input means. "error": the sample is held (flag ``"non-finite"``).
         "marginalize": the input is missing; the sample is filtered on its observed inputs,
         as ``predict`` of a model with ``missing_values="marginalize"`` does (flag
-        ``"missing"``). ``None``: the estimator's ``missing_values`` when ``model`` is an
-        estimator, "error" for a :class:`~skhmmgmr.FittedHMMGMR`.
+        ``"missing"``). "carry_forward": the same, with the missing inputs read through their
+        last observed values in the recording (since :meth:`reset`), as ``predict`` of a
+        model fitted with ``missing_values="carry_forward"`` does (the model must hold the
+        inputs' variograms, ``stale_noise``). ``None``: the estimator's ``missing_values``
+        when ``model`` is an estimator, "error" for a :class:`~skhmmgmr.FittedHMMGMR`.
     relevance : float, default=None
         Online adaptation of the state means (see Notes): the relevance factor ``r`` > 0 of
         the MAP rule of :meth:`HMMGMRRegressor.adapt <skhmmgmr.HMMGMRRegressor.adapt>`.
@@ -96,9 +100,9 @@ class FilterStream:
     of sample are held:
 
     - ``"non-finite"``: an infinite input, or a NaN one unless missing values are
-      marginalised (``missing_values="marginalize"``: the sample is then filtered on its
-      observed inputs, and a sample with none passes the state probabilities through the
-      transition matrix);
+      missing values (``missing_values="marginalize"`` or ``"carry_forward"``: the sample is
+      then filtered on its observed inputs, and a sample with none passes the state
+      probabilities through the transition matrix);
     - ``"outlier"``: finite inputs so far from every state that all input log-densities are below
       ``min_log_density`` (or standardised inputs whose absolute values sum above 1e100, where
       the densities would overflow). ``predict`` would extrapolate the nearest state's linear
@@ -141,17 +145,18 @@ class FilterStream:
     ):
         if missing_values is None:
             missing_values = getattr(model, "missing_values", "error")
-        if missing_values not in ("error", "marginalize"):
+        if missing_values not in MISSING_VALUES:
             raise ValueError(
-                f"missing_values must be 'error' or 'marginalize', got {missing_values!r}"
+                f"missing_values must be one of {MISSING_VALUES}, got {missing_values!r}"
             )
         self.missing_values = missing_values
-        self._marginalize = missing_values == "marginalize"
+        self._marginalize = missing_values != "error"
         self.relevance, self.forgetting = check_adaptation(relevance, forgetting)
         if not isinstance(model, FittedHMMGMR):
             check_is_fitted(model)
             model = model.model_
         self._model = model
+        self._carried = carried_inputs(model, missing_values)
         params, scaling = model.gmr, model.standardization
         n_states, n_outputs, n_inputs = params.coef.shape
         self.n_features_in_ = n_inputs
@@ -245,6 +250,8 @@ class FilterStream:
         self.last_flag_ = FLAG_OK
         self.n_samples_ = 0
         self.recording_ = None
+        if self._carried is not None:
+            self._carried.reset()
         return self
 
     def reset_adaptation(self):
@@ -328,6 +335,8 @@ class FilterStream:
     def _step(self):
         """Advance the filter with the standardised sample in ``self._z``."""
         self.n_samples_ += 1
+        if self._carried is not None:
+            self._carried.observe(self._z_inputs, self.n_samples_)
         z_list = self._z_inputs.tolist()
         product, whitened, means = self._work
         # NaN and infinity propagate into the sum; huge inputs would overflow the squares.
@@ -389,7 +398,8 @@ class FilterStream:
         if not np.sum(np.abs(z)) < _MAX_STANDARDISED:
             return None
         params = self._gmr if self._online is None else self._online.gmr()
-        log_prob, state_means, added = gmr_given_observed(params, z, missing[np.newaxis])
+        stale = None if self._carried is None else self._carried.read(missing, self.n_samples_)
+        log_prob, state_means, added = gmr_given_observed(params, z, missing[np.newaxis], stale)
         log_prob = log_prob[0]
         top = log_prob.max()
         if not (missing.all() or top >= self.min_log_density and np.isfinite(log_prob).all()):

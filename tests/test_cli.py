@@ -228,3 +228,23 @@ def test_select_reports_an_empty_candidate(tmp_path, capsys, monkeypatch):
     candidates = pd.read_csv(output / "candidates.csv").set_index("name")
     assert candidates.loc["Strict 2", "features"] == "(empty)"
     assert "(empty)" in (output / "index.html").read_text()
+
+
+def test_select_resamples_recordings_with_gaps_on_request(tmp_path, capsys):
+    data = make_recordings(n_recordings=6, split=False)
+    data["t"] += np.random.default_rng(1).uniform(-0.002, 0.002, len(data))  # jitter
+    data = data.drop(index=[10, 11, 100]).reset_index(drop=True)  # r0: 0.15 s gap, r1: 0.1 s
+    data.loc[data["run"] == "r2", "t"] += np.where(data.loc[data["run"] == "r2", "t"] > 2, 5, 0)
+    path = tmp_path / "runs.csv"
+    data.to_csv(path, index=False)
+    argv = ["select", str(path), "--target", "torque", "--recording", "run", "--time", "t"]
+    argv += ["--n-top", "2", "--k-max", "2", "--trade-off-step", "50", "--quiet"]
+    assert main([*argv, "--sampling-rate", "20", "--output", str(tmp_path / "a")]) == 2
+    assert "is not sampled at 20.0 Hz" in capsys.readouterr().err
+    assert main([*argv, "--max-gap", "0.2", "--output", str(tmp_path / "a")]) == 2
+    assert "max_gap needs sampling_rate" in capsys.readouterr().err
+    resample = ["--sampling-rate", "20", "--max-gap", "0.2", "--output", str(tmp_path / "b")]
+    assert main([*argv, *resample]) == 0
+    manifest = json.loads((tmp_path / "b" / "manifest.json").read_text())
+    counts = manifest["details"]["recordings (train/validation/test)"].split("/")
+    assert sum(map(int, counts)) == 7  # r2 split at its 5-s gap; the short gaps interpolated

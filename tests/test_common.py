@@ -39,6 +39,7 @@ ESTIMATORS = [
     HMMGMRRegressor(n_states=2, random_state=0),
     # NaN inputs marginalised: allow_nan, so the checks also fit and predict with NaN
     HMMGMRRegressor(n_states=2, missing_values="marginalize", random_state=0),
+    HMMGMRRegressor(n_states=2, missing_values="carry_forward", random_state=0),
     SpearmanSelector(k=1),
     ExhaustiveFeatureSelector(max_features=1, **SEARCH),
     ForwardFeatureSelector(max_features=1, **SEARCH),

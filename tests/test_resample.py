@@ -181,3 +181,42 @@ def test_load_recordings_resamples_a_csv_with_gaps_on_request(tmp_path):
         load_recordings(tmp_path / "drive7.csv", max_gap=0.25)
     with pytest.raises(ValueError, match="max_gap must be at least one sampling period"):
         load_recordings(tmp_path / "drive7.csv", sampling_rate=10.0, max_gap=0.01)
+
+
+def test_load_recordings_keeps_missing_values_on_request_and_drops_short_pieces(tmp_path):
+    raw = pd.DataFrame(
+        {
+            "time": [0.0, 0.1, 0.2, 0.3, 0.4, 2.0, 3.0, 3.1, 3.2],  # two long gaps
+            "yaw_rate": [0.0, 0.1, np.nan, 0.3, 0.4, 2.0, 3.0, 3.1, 3.2],
+            "driver_torque": [1.0, np.nan, 1.0, 1.0, 1.0, 2.0, 2.0, 2.0, 2.0],
+        }
+    )
+    raw.to_csv(tmp_path / "drive7.csv", index=False)
+    with pytest.raises(
+        ValueError, match=r"'driver_torque' holds NaN in recording 'drive7' \(.*row 1"
+    ):
+        load_recordings(tmp_path / "drive7.csv")
+    frame = load_recordings(tmp_path / "drive7.csv", allow_missing=True)
+    np.testing.assert_array_equal(frame["yaw_rate"], raw["yaw_rate"])
+    np.testing.assert_array_equal(frame["driver_torque"], raw["driver_torque"])
+    with pytest.warns(UserWarning, match="dropped 1 piece.*shorter than min_length=2"):
+        frame = load_recordings(
+            tmp_path / "drive7.csv",
+            sampling_rate=10.0,
+            max_gap=0.25,
+            min_length=2,
+            allow_missing=True,
+        )
+    # the 1-sample piece at 2.0 s is dropped; the missing sample stays missing on the grid
+    assert frame["recording"].tolist() == ["drive7/0"] * 5 + ["drive7/2"] * 3
+    np.testing.assert_allclose(frame["time"], [0.0, 0.1, 0.2, 0.3, 0.4, 3.0, 3.1, 3.2], atol=1e-9)
+    assert np.isnan(frame["yaw_rate"].iloc[2]) and np.isnan(frame["driver_torque"].iloc[1])
+    assert not frame["yaw_rate"].drop(index=2).isna().any()
+    raw.loc[4, "yaw_rate"] = np.inf
+    raw.to_csv(tmp_path / "drive7.csv", index=False)
+    with pytest.raises(ValueError, match="'yaw_rate' holds an infinite value"):
+        load_recordings(tmp_path / "drive7.csv", allow_missing=True)
+    raw.loc[4, ["yaw_rate", "time"]] = [0.4, np.nan]
+    raw.to_csv(tmp_path / "drive7.csv", index=False)
+    with pytest.raises(ValueError, match="'time' holds NaN"):
+        load_recordings(tmp_path / "drive7.csv", allow_missing=True)

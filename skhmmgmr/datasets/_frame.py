@@ -29,7 +29,16 @@ META_DEFAULTS = {DRIVER: UNKNOWN, SETTING: np.nan, SPLIT: UNKNOWN}
 STEP_RTOL = 0.01
 
 
-def tidy_frame(columns, *, units=None, attrs=None, sampling_rate=None, source=None, row=None):
+def tidy_frame(
+    columns,
+    *,
+    units=None,
+    attrs=None,
+    sampling_rate=None,
+    source=None,
+    row=None,
+    allow_missing=False,
+):
     """Assemble the tidy frame of the schema from its columns, and validate it.
 
     Parameters
@@ -53,6 +62,9 @@ def tidy_frame(columns, *, units=None, attrs=None, sampling_rate=None, source=No
     row : array-like of int, default=None
         Row numbers named in error messages; by default the positions of the rows in
         ``columns``, from 0.
+    allow_missing : bool, default=False
+        Keep NaN in the features and the target as missing values (the time must still be
+        complete; infinities are refused either way).
 
     Returns
     -------
@@ -100,7 +112,7 @@ def tidy_frame(columns, *, units=None, attrs=None, sampling_rate=None, source=No
     out[RECORDING] = rows.recording = rows.text(RECORDING, out[RECORDING])
     for name in (DRIVER, SPLIT):
         out[name] = rows.text(name, out[name])
-    rows.check_finite({name: out[name] for name in numeric})
+    rows.check_finite({name: out[name] for name in numeric}, allow_nan=allow_missing, time=TIME)
     codes = rows.check_contiguous()
     if TIME in out:
         rows.check_time(codes, sampling_rate)
@@ -296,10 +308,12 @@ class _Rows:
             raise ValueError(f"The column {name!r} is empty in {self.where(i)}.")
         return pd.Series(values, copy=False).astype(str).array
 
-    def check_finite(self, columns):
+    def check_finite(self, columns, allow_nan=False, time=None):
+        """Refuse non-finite values (with ``allow_nan``, infinities, and NaN in ``time``)."""
         first, n_bad = None, 0
         for name, values in columns.items():
-            bad = np.flatnonzero(~np.isfinite(values))
+            finite = np.isfinite(values) | (allow_nan and name != time) & np.isnan(values)
+            bad = np.flatnonzero(~finite)
             n_bad += bad.size
             if bad.size and (first is None or bad[0] < first[1]):
                 first = name, int(bad[0])

@@ -190,6 +190,8 @@ def load_recordings(
     features=None,
     sampling_rate=None,
     max_gap=None,
+    min_length=1,
+    allow_missing=False,
     units=None,
 ):
     """Load driving recordings from CSV or Parquet files, or a DataFrame, into the tidy frame.
@@ -228,6 +230,14 @@ def load_recordings(
         Features that are integer or boolean in their source (flags, gears, counters) take the
         value of the latest sample (previous-value hold), the others and the target are
         interpolated linearly. By default recordings are not resampled.
+    min_length : int, default=1
+        With ``max_gap``: pieces of a recording (between long gaps) with fewer grid samples
+        are dropped, with a warning (see :func:`resample_recordings`).
+    allow_missing : bool, default=False
+        Keep NaN in the features and the target as missing values, for a model that handles
+        them (``HMMGMRRegressor(missing_values="marginalize")`` or ``"carry_forward"``). A
+        missing sample stays missing on the grid (nothing is interpolated from or across it).
+        Times and recording ids must be complete, and infinities are refused either way.
     units : dict of str to str, default=None
         Units of the columns, by their name in the source, added to ``attrs["units"]``. The
         schema's columns default to their SI units, others to ``"unknown"``.
@@ -249,10 +259,10 @@ def load_recordings(
         Naming the file, recording, column and first offending row (0-based, among the data
         rows of its source) and time, when a file cannot be read (empty, no data row, not
         UTF-8, truncated, a row longer than the header), a column is missing, a value is NaN
-        or infinite, a recording id, driver or split is empty, a time is repeated within a
-        recording, a recording is not sampled at ``sampling_rate`` (without ``max_gap``), or one
-        recording id is in two files. Also when ``max_gap`` is given without ``sampling_rate``
-        or is shorter than one period.
+        (unless ``allow_missing``) or infinite, a recording id, driver or split is empty, a
+        time is repeated within a recording, a recording is not sampled at ``sampling_rate``
+        (without ``max_gap``), or one recording id is in two files. Also when ``max_gap`` is
+        given without ``sampling_rate`` or is shorter than one period.
 
     Notes
     -----
@@ -317,7 +327,10 @@ def load_recordings(
         sampling_rate=sampling_rate if max_gap is None else None,
         source=frame[_SOURCE].to_numpy(),
         row=frame[_ROW].to_numpy(),
+        allow_missing=allow_missing,
     )
     if max_gap is None:
         return frame
-    return resample_recordings(frame, sampling_rate, max_gap=max_gap, hold=sorted(held))
+    return resample_recordings(
+        frame, sampling_rate, max_gap=max_gap, min_length=min_length, hold=sorted(held)
+    )
