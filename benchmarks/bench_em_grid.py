@@ -15,7 +15,7 @@ cores): the reference by ``prange`` (numba's workqueue layer), the engine on its
 BLAS is limited to one thread. A plot of the cost against K (one line per D) and
 against D is written to ``docs/_static/em_grid.png``. Run with::
 
-    python benchmarks/bench_em_grid.py            # the whole grid, about 30 minutes
+    python benchmarks/bench_em_grid.py            # the whole grid, about 12 minutes (idle)
     python benchmarks/bench_em_grid.py --quick    # D in {3, 7, 19}, K in {2, 5, 6, 8, 10, 16}
     python benchmarks/bench_em_grid.py --hmmlearn --dims 3 7 --states 5 10   # with hmmlearn
 """
