@@ -18,7 +18,7 @@ import numpy as np
 from scipy import linalg
 from threadpoolctl import ThreadpoolController
 
-from ._kernels import pairwise_products
+from ._kernels import pairwise_products, weighted_pair_sums
 
 LOG_2PI = np.log(2.0 * np.pi)
 
@@ -179,18 +179,21 @@ class MomentSums:
     """Weighted moments ``sum_t r_tk [x_t; 1] [x_t; 1]^T`` of augmented columns, chunk by chunk.
 
     The result holds, per state, the second moments, the first moments in the last column and
-    the weight in the corner (see :func:`split_moments`). Two ways give the same sums:
+    the weight in the corner (see :func:`split_moments`). Two ways give the same sums (to
+    round-off):
 
-    - ``"syrk"``: one symmetric product per state of its ``sqrt(r)``-weighted columns (BLAS
-      syrk);
     - ``"pairs"``: one product of all states' posteriors with the pairwise products of the
       columns (``x_a x_b`` for ``a <= b``), built for sub-chunks of rows small enough to stay
-      in cache: one BLAS call per sub-chunk instead of one per state.
+      in cache: one BLAS call per sub-chunk instead of one per state;
+    - ``"direct"``: one compiled pass per state that reduces each weighted column against the
+      others (:func:`~skhmmgmr._kernels.weighted_pair_sums`), with no array of products.
 
-    Measured inside the EM on one core (504,000 rows, AVX-512, OpenBLAS), the pairwise
-    products are faster whenever at least two states are accumulated (2x for 5 states over 10
-    columns, 3x for 10 states over 14 columns) or the columns are fewer than 8; a lone state
-    over 8 columns or more is faster by syrk (2x over 20 columns).
+    Measured on one core (504,000 rows, AVX-512, OpenBLAS), "direct" is the faster for one or
+    two accumulated states (the EM with K=2 or 3 states, whose heaviest state is taken as the
+    remainder): 1.7x to 2.9x "pairs" over 4 to 8 columns, 1.4x over 12. It is also faster than
+    one BLAS syrk per state of its ``sqrt(r)``-weighted columns, which served a lone state over
+    8 columns or more before (1.7x over 8 columns, 1.3x over 20). From four states on "pairs"
+    is the faster (1.2x to 1.7x over 8 to 14 columns).
 
     Parameters
     ----------
@@ -199,7 +202,7 @@ class MomentSums:
         Number of augmented columns (features + 1).
     states : list of int, default=None
         States whose moments are accumulated (all when None); the others stay zero.
-    method : {"pairs", "syrk"}, default=None
+    method : {"direct", "pairs"}, default=None
         How the sums are computed; default: the faster one for these sizes (see above).
     sub_chunk : int, default=None
         Rows per sub-chunk of the pairwise products; default: as many as fit in
@@ -211,42 +214,35 @@ class MomentSums:
         self.n_columns = n_columns
         self.states = list(range(n_states)) if states is None else list(states)
         if method is None:
-            method = "pairs" if len(self.states) > 1 or n_columns < 8 else "syrk"
-        if method not in ("pairs", "syrk"):
-            raise ValueError(f"method must be 'pairs' or 'syrk', got {method!r}")
+            method = "direct" if len(self.states) <= 2 else "pairs"
+        if method not in ("pairs", "direct"):
+            raise ValueError(f"method must be 'pairs' or 'direct', got {method!r}")
         self.method = method
-        if method == "pairs":
-            rows, cols = np.triu_indices(n_columns)
-            self._pairs = (rows.astype(np.int64), cols.astype(np.int64))
-            if sub_chunk is None:
-                sub_chunk = max(PAIR_BUFFER_VALUES // len(rows), 256)
-            self.sub_chunk = int(sub_chunk)
-            self._buffer = None
-            self._sums = np.zeros((len(self.states), len(rows)))
-        else:
-            self._sums = np.zeros((n_states, n_columns, n_columns))
+        rows, cols = np.triu_indices(n_columns)
+        self._pairs = (rows.astype(np.int64), cols.astype(np.int64))
+        if sub_chunk is None:
+            sub_chunk = max(PAIR_BUFFER_VALUES // len(rows), 256)
+        self.sub_chunk = int(sub_chunk)
+        self._buffer = None
+        self._sums = np.zeros((len(self.states), len(rows)))
 
     def add(self, respT, columns, first=0):
         """Add one chunk: posteriors (n_states, n_rows) of the rows
         ``columns[:, first : first + n_rows]`` of augmented columns."""
         n_rows = respT.shape[1]
+        if not columns.flags.c_contiguous:
+            # the kernels need C-contiguous rows: copy this chunk only, never the whole array
+            columns, first = np.ascontiguousarray(columns[:, first : first + n_rows]), 0
         if self.method == "pairs":
-            if not columns.flags.c_contiguous:
-                # the kernel needs C-contiguous rows: copy this chunk only, never the whole array
-                columns, first = np.ascontiguousarray(columns[:, first : first + n_rows]), 0
             self._add_pairs(respT, columns, first, n_rows)
-            return
-        chunk = columns[:, first : first + n_rows]
-        for k in self.states:
-            # (sqrt(r) x)(sqrt(r) x)^T is a product of an array with its own transpose, which
-            # NumPy hands to BLAS syrk (half the work of a general product).
-            rooted = chunk * np.sqrt(respT[k])
-            self._sums[k] += rooted @ rooted.T
+        else:
+            weights = respT if len(self.states) == self.n_states else respT[self.states]
+            weighted_pair_sums(columns, first, np.ascontiguousarray(weights), self._sums)
 
     def add_pair_sums(self, sums):
         """Add moments already summed over rows: ``sums`` (len(states), n_pairs) holds, per
         accumulated state, the weighted sums of ``x_a x_b`` for the pairs ``a <= b`` in the
-        order of :func:`numpy.triu_indices` (method ``"pairs"`` only)."""
+        order of :func:`numpy.triu_indices`."""
         self._sums += sums
 
     def _add_pairs(self, respT, columns, first, n_rows):
@@ -263,8 +259,6 @@ class MomentSums:
 
     def result(self):
         """The sums, shape (n_states, n_columns, n_columns)."""
-        if self.method == "syrk":
-            return self._sums
         moments = np.zeros((self.n_states, self.n_columns, self.n_columns))
         rows, cols = self._pairs
         states = np.asarray(self.states, dtype=np.intp)[:, np.newaxis]

@@ -201,6 +201,43 @@ def pairwise_products(columns, first, rows, cols, out):
             row[t] = left[t] * right[t]
 
 
+# Rows per block of weighted_pair_sums: its columns and weighted row stay in L1.
+PAIR_BLOCK_ROWS = 256
+
+
+@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+def weighted_pair_sums(columns, first, weights, out):
+    """``out[s, p] += sum_t weights[s, t] x_a[first + t] x_b[first + t]`` for the pairs
+    ``p = (a, b)``, ``a <= b``, of the rows of ``columns`` in the order of
+    :func:`numpy.triu_indices`, and ``t < weights.shape[1]``.
+
+    ``weights`` (n_states, n_rows) and ``columns`` are C-contiguous. Per block of rows in L1,
+    each column is weighted once (``w x_a``) and then reduced against the columns after it:
+    one multiply-add per pair and row, and no array of products (the reductions are
+    reassociated, so they vectorise; the sums differ from a product with the pairwise
+    products, :func:`pairwise_products`, by round-off).
+    """
+    n_states, n_rows = weights.shape
+    n_columns = columns.shape[0]
+    weighted = np.empty(PAIR_BLOCK_ROWS)
+    for lo in range(0, n_rows, PAIR_BLOCK_ROWS):
+        hi = min(lo + PAIR_BLOCK_ROWS, n_rows)
+        for s in range(n_states):
+            w = weights[s, lo:hi]
+            p = 0
+            for a in range(n_columns):
+                left = columns[a, first + lo : first + hi]
+                for t in range(hi - lo):
+                    weighted[t] = w[t] * left[t]
+                for b in range(a, n_columns):
+                    right = columns[b, first + lo : first + hi]
+                    total = 0.0
+                    for t in range(hi - lo):
+                        total += weighted[t] * right[t]
+                    out[s, p] += total
+                    p += 1
+
+
 # Below this, exp() of a log-density difference is subnormal (exp(-708.4) is the smallest
 # normal double): such a frame is set to zero, which changes no sum it enters (every row also
 # holds a frame of exactly one) and avoids the slow subnormal path of exp. It can make a row

@@ -246,6 +246,8 @@ class MissingRows:
 
 def observed_counts(*blocks):
     """Rows, or per column the number of observed (non-NaN) values of ``hstack(blocks)``."""
+    if not any(np.isnan(np.sum(block)) for block in blocks):  # complete: one pass, no mask
+        return blocks[0].shape[0]
     counts = np.concatenate([np.sum(~np.isnan(block), axis=0) for block in blocks])
     n_rows = blocks[0].shape[0]
     return n_rows if np.all(counts == n_rows) else counts

@@ -192,7 +192,7 @@ def test_heaviest_state_from_totals_matches_full_accumulation():
 
 @pytest.mark.parametrize("n_states", [2, 6, 12])
 @pytest.mark.parametrize(
-    ("method", "sub_chunk"), [("syrk", None), ("pairs", None), ("pairs", 64), ("pairs", 1)]
+    ("method", "sub_chunk"), [("direct", None), ("pairs", None), ("pairs", 64), ("pairs", 1)]
 )
 def test_moment_sums_match_a_plain_sum(n_states, method, sub_chunk):
     rng = np.random.default_rng(9)
@@ -212,11 +212,11 @@ def test_moment_sums_match_a_plain_sum(n_states, method, sub_chunk):
     assert not only.result()[1:-1].any()
 
 
-def test_moment_sums_choose_syrk_only_for_one_state_over_many_columns():
-    assert MomentSums(2, 10, states=[1]).method == "syrk"
-    assert MomentSums(2, 5, states=[1]).method == "pairs"
-    assert MomentSums(3, 20, states=[0, 2]).method == "pairs"
-    assert MomentSums(1, 20).method == "syrk"
+def test_moment_sums_reduce_directly_only_for_one_or_two_states():
+    assert MomentSums(2, 10, states=[1]).method == "direct"
+    assert MomentSums(3, 20, states=[0, 2]).method == "direct"
+    assert MomentSums(1, 20).method == "direct"
+    assert MomentSums(4, 5, states=[0, 1, 3]).method == "pairs"
     # sub-chunks of pairwise products stay within the cache-sized buffer
     sums = MomentSums(5, 20)
     assert sums.sub_chunk * 20 * 21 // 2 <= PAIR_BUFFER_VALUES
