@@ -23,15 +23,16 @@ transition matrix, ``alpha_t A^h``, and mixes per-state outputs (see
 from dataclasses import replace
 
 import numpy as np
-from sklearn.utils.validation import check_is_fitted, validate_data
+from sklearn.utils.validation import check_is_fitted
 
 from ._em import HMMParameters, e_step
 from ._em_data import Columns, EStepData
 from ._emissions import make_emissions
 from ._fitted import FittedHMMGMR
-from ._gmr import gmr_estimates, mix_estimates
+from ._gmr import filter_state_probabilities, gmr_estimates, mix_estimates
 from ._missing import observed_counts
 from ._panel import read_row_order
+from ._prediction_inputs import read_inputs
 from ._sequences import as_recordings
 from ._validation import check_finite, check_target_finite, column_names_of, validate_joint
 
@@ -275,21 +276,21 @@ class AdaptMixin:
             )
         if int(steps) != steps or steps < 0:
             raise ValueError(f"steps must be an integer >= 0, got {steps!r}")
-        alpha = self.predict_state_proba(X, groups=groups, time=time)
+        # The rows in filter order, read once (with their missing values) for both steps.
+        standardized, recordings, rows, missing = read_inputs(self, X, groups, time)
         model = self.model_
+        alpha = filter_state_probabilities(standardized, recordings, model.gmr, missing=missing)
         ahead = alpha @ np.linalg.matrix_power(model.transmat, int(steps))
         if steps == 0 or state_output == "conditional":
-            X = validate_data(self, X, reset=False, ensure_all_finite=False, dtype=float)
-            standardized = model.standardization.inputs(X)
-            estimate, std = gmr_estimates(standardized, ahead, model.gmr, return_std=return_std)
+            estimate, std = gmr_estimates(standardized, ahead, model.gmr, return_std, missing)
         else:
             estimate, std = marginal_estimates(ahead, model, return_std)
         estimate = model.standardization.outputs(estimate)
-        estimate = estimate[:, 0] if model.scalar_output else estimate
+        estimate = rows.to_caller_order(estimate[:, 0] if model.scalar_output else estimate)
         if not return_std:
             return estimate
         std = model.standardization.output_std(std)
-        return estimate, std[:, 0] if model.scalar_output else std
+        return estimate, rows.to_caller_order(std[:, 0] if model.scalar_output else std)
 
 
 def marginal_estimates(ahead, model, return_std=False):

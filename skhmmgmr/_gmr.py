@@ -57,7 +57,16 @@ def condition_on_inputs(startprob, transmat, emissions, n_inputs):
     return GMRParameters(startprob, transmat, gating, coef, intercept, conditional)
 
 
-def filter_state_probabilities(X, recordings, params, chunk_size=None, stale_noise=None):
+def read_missing(X, recordings, stale_noise=None):
+    """The rows of standardised inputs ``X`` that miss a value (a
+    :class:`~skhmmgmr._missing.MissingRows`, None when none does), read through the last
+    observed values of the missing ones when ``stale_noise`` is given
+    (:mod:`skhmmgmr._stale_inputs`). Read once, for both the filter and the read-out."""
+    stale = None if stale_noise is None else (stale_noise, recordings.starts, recordings.stops)
+    return MissingRows.of(X.T, stale=stale)
+
+
+def filter_state_probabilities(X, recordings, params, chunk_size=None, missing=None):
     """Filtered state probabilities ``alpha_t,k`` given the inputs up to ``t``.
 
     The recursion restarts from the start probabilities at the first row of every recording.
@@ -65,8 +74,8 @@ def filter_state_probabilities(X, recordings, params, chunk_size=None, stale_noi
     When no state that the transitions allow explains a row (every product underflows), the
     recursion restarts at that row from the input densities alone instead of producing NaN.
     A row with missing inputs (NaN) takes the densities of its observed inputs (and of the
-    last observed values of the missing ones, given their ``stale_noise``,
-    :mod:`skhmmgmr._stale_inputs`).
+    carried values of the missing ones when ``missing``, from :func:`read_missing`, holds
+    them; None: read here from ``X``).
     """
     n_samples = X.shape[0]
     n_states, n_inputs = params.n_states, params.gating.n_dims
@@ -76,7 +85,7 @@ def filter_state_probabilities(X, recordings, params, chunk_size=None, stale_noi
     for start in range(0, n_samples, step):
         rows = slice(start, start + step)
         density.frames(augmented_columns(X[rows]), frames[rows], top[rows])
-    missing = MissingRows.of(X.T, stale=_stale(stale_noise, recordings))
+    missing = MissingRows.of(X.T) if missing is None else missing
     if missing is not None:
         missing.overwrite(params.gating, 0, n_samples, frames, top)
     alpha = np.empty_like(frames)
@@ -91,10 +100,6 @@ def filter_state_probabilities(X, recordings, params, chunk_size=None, stale_noi
         restart=True,
     )
     return alpha
-
-
-def _stale(noise, recordings):
-    return None if noise is None else (noise, recordings.starts, recordings.stops)
 
 
 def conditional_means(X, params):
@@ -118,15 +123,16 @@ def _sum_over_states(alpha, values):
     return out
 
 
-def gmr_estimates(X, alpha, params, return_std=False, recordings=None, stale_noise=None):
+def gmr_estimates(X, alpha, params, return_std=False, missing=None):
     """Estimates of the outputs (and their std) given the state probabilities ``alpha``.
 
     The conditional means of every state given the inputs of each row (given the observed
-    ones in a row with missing inputs, and the last observed values of the missing ones given
-    their ``stale_noise`` in ``recordings``), mixed by :func:`mix_estimates`.
+    ones in a row with missing inputs, and the carried values of the missing ones when
+    ``missing``, from :func:`read_missing`, holds them; None: read here from ``X``), mixed by
+    :func:`mix_estimates`.
     """
     state_means = conditional_means(X, params)
-    missing = MissingRows.of(X.T, stale=_stale(stale_noise, recordings))
+    missing = MissingRows.of(X.T) if missing is None else missing
     if missing is None:
         return mix_estimates(alpha, state_means, params, return_std=return_std)
     state_means[missing.rows], added = missing.outputs(params)

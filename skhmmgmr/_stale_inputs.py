@@ -157,15 +157,9 @@ class CarriedInputs:
         self.seen_at[seen] = count
 
     def read(self, missing, count):
-        noise = self.noise
-        carried, precisions = np.zeros((2, 1, self.values.size))
-        for j in np.flatnonzero(missing & (self.seen_at > 0)).tolist():
-            gap = count - int(self.seen_at[j])
-            if noise.lags.size and gap <= noise.lags[-1]:
-                variance = float(np.interp(gap, noise.lags, noise.variances[j]))
-                if variance < np.inf:
-                    carried[0, j], precisions[0, j] = self.values[j], 1.0 / variance
-        return carried, precisions
+        gaps = np.where(missing & (self.seen_at > 0), count - self.seen_at, 0)[np.newaxis]
+        precisions = self.noise.precisions(gaps)
+        return np.where(precisions > 0, self.values, 0.0), precisions
 
 
 def learn_stale_noise(missing_values, columns, n_inputs, recordings):

@@ -251,19 +251,3 @@ def check_column_scales(scale, column_names):
         f"lie within {low:g}..{high:g}). Change the column's unit (e.g. multiply it by a "
         "power of ten) before fitting."
     )
-
-
-def warn_if_one_long_recording(estimator, n_samples):
-    """Warn when ``n_samples`` rows without recordings outnumber the longest training
-    recording of ``estimator`` (its ``longest_recording_``)."""
-    longest = getattr(estimator, "longest_recording_", None)
-    if longest is not None and n_samples > longest:
-        warnings.warn(
-            f"{n_samples} rows without groups are filtered as ONE recording, longer than "
-            f"the longest training recording ({longest} rows). If they hold several "
-            "recordings, pass groups=<recording id per row>, or give X a pandas index with "
-            "a 'recording' level (skhmmgmr.datasets.to_panel), so that the filter restarts "
-            "at every recording.",
-            UserWarning,
-            stacklevel=3,
-        )

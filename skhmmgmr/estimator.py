@@ -8,7 +8,7 @@ from sklearn.base import BaseEstimator, RegressorMixin, TransformerMixin
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.metrics import r2_score
 from sklearn.utils import metadata_routing
-from sklearn.utils.validation import check_is_fitted, validate_data
+from sklearn.utils.validation import check_is_fitted
 
 from ._adaptation import AdaptMixin
 from ._compat import Interval, StrOptions, _fit_context
@@ -21,8 +21,9 @@ from ._fitted import FittedHMMGMR, Standardization
 from ._gmr import filter_state_probabilities, gmr_estimates
 from ._missing import observed_counts
 from ._panel import read_row_order
+from ._prediction_inputs import read_inputs, warn_if_one_long_recording
 from ._sequences import as_recordings
-from ._stale_inputs import MISSING_VALUES, learn_stale_noise, stale_noise_for
+from ._stale_inputs import MISSING_VALUES, learn_stale_noise
 from ._validation import (
     check_column_scales,
     check_enough_rows,
@@ -30,7 +31,6 @@ from ._validation import (
     check_target_finite,
     column_names_of,
     validate_joint,
-    warn_if_one_long_recording,
 )
 
 
@@ -343,19 +343,6 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         check_is_fitted(self)
         return np.array(self.model_.data_emissions.full_covariances)
 
-    def _validate_inputs(self, X, groups, time):
-        check_is_fitted(self)
-        rows = read_row_order(X, groups, time)
-        X = validate_data(
-            self, rows.to_filter_order(X), reset=False, ensure_all_finite=False, dtype=float
-        )
-        if rows.groups is None:
-            warn_if_one_long_recording(self, X.shape[0])
-        recordings = as_recordings(rows.groups, X.shape[0], time=rows.time)
-        names, allow_nan = column_names_of(self, X.shape[1]), self.missing_values != "error"
-        check_finite(X, name="X", column_names=names, recordings=recordings, allow_nan=allow_nan)
-        return self.model_.standardization.inputs(X), recordings, rows
-
     def predict_state_proba(self, X, groups=None, time=None):
         """Filtered state probabilities ``alpha_t,k`` given the inputs up to each row.
 
@@ -372,11 +359,9 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         alpha : ndarray of shape (n_samples, n_states)
             Rows sum to one.
         """
-        standardized, recordings, rows = self._validate_inputs(X, groups, time)
-        noise = stale_noise_for(self.model_, self.missing_values)
-        alpha = filter_state_probabilities(
-            standardized, recordings, self.model_.gmr, stale_noise=noise
-        )
+        standardized, recordings, rows, missing = read_inputs(self, X, groups, time)
+        gmr = self.model_.gmr
+        alpha = filter_state_probabilities(standardized, recordings, gmr, missing=missing)
         return rows.to_caller_order(alpha)
 
     def predict(self, X, groups=None, time=None, return_std=False):
@@ -399,12 +384,10 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         y_pred : ndarray of shape (n_samples,) or (n_samples, n_outputs)
         y_std : ndarray of the same shape, only when ``return_std`` is True
         """
-        standardized, recordings, rows = self._validate_inputs(X, groups, time)
-        model, noise = self.model_, stale_noise_for(self.model_, self.missing_values)
-        alpha = filter_state_probabilities(standardized, recordings, model.gmr, stale_noise=noise)
-        estimate, std = gmr_estimates(
-            standardized, alpha, model.gmr, return_std, recordings, stale_noise=noise
-        )
+        standardized, recordings, rows, missing = read_inputs(self, X, groups, time)
+        model = self.model_
+        alpha = filter_state_probabilities(standardized, recordings, model.gmr, missing=missing)
+        estimate, std = gmr_estimates(standardized, alpha, model.gmr, return_std, missing=missing)
         estimate = model.standardization.outputs(estimate)
         estimate = rows.to_caller_order(estimate[:, 0] if model.scalar_output else estimate)
         if not return_std:

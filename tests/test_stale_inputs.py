@@ -328,3 +328,25 @@ def test_carry_forward_needs_the_variograms(carry_model):
             model.model_.standardization,
             stale_noise=StaleInputNoise(np.array([1, 2]), np.ones((2, 2))),
         )
+
+
+def test_predict_ahead_carries_like_predict(carry_model):
+    model, X, _, groups = carry_model
+    expected, expected_std = model.predict(X, groups=groups, return_std=True)
+    now, now_std = model.predict_ahead(X, 0, groups=groups, return_std=True)
+    np.testing.assert_allclose(now, expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(now_std, expected_std, rtol=0, atol=1e-12)
+    # rows shuffled, recordings and time in the index: the carried values follow time order
+    frame = pd.DataFrame(
+        X,
+        index=pd.MultiIndex.from_arrays(
+            [groups, np.tile(np.arange(100) * 0.05, 2)], names=["recording", "time"]
+        ),
+    )
+    order = np.random.default_rng(10).permutation(len(frame))
+    shuffled = model.predict_ahead(frame.iloc[order], 0)
+    np.testing.assert_allclose(shuffled, expected[order], rtol=0, atol=1e-12)
+    ahead = model.predict_ahead(frame.iloc[order], 5, state_output="conditional")
+    np.testing.assert_allclose(
+        ahead, model.predict_ahead(X, 5, groups=groups, state_output="conditional")[order]
+    )
