@@ -25,9 +25,8 @@ holding whole consecutive recordings of about one cache-sized chunk of rows:
 
 1. the emission log-densities of all states, one BLAS product per chunk
    (:meth:`~skhmmgmr._emissions.GaussianEmissions.density`), scaled to a maximum of one per row and
-   exponentiated in one compiled pass (:func:`~skhmmgmr._kernels.scaled_densities`), which
-   skips the exponential where its value is known (one at the row's largest, zero below the
-   underflow);
+   exponentiated (:func:`~skhmmgmr._kernels.scaled_densities`: one compiled pass, then NumPy's
+   exp where it is vectorised, else an exp in the pass only where the value is not known);
 2. the compiled forward and backward recursions (:mod:`skhmmgmr._kernels`), which also give
    the posteriors and the terms of the expected transitions;
 3. the expected transitions as one product, and the weighted moments of all states as one

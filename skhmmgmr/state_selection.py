@@ -213,9 +213,7 @@ class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
         given = X  # refit on it: best_estimator_ then knows the feature names
         X, y, groups, splits = self._validate_search(X, y, groups)
         estimator = default_estimator() if self.estimator is None else self.estimator
-        # Largest K first: the longest fits start at once instead of finishing last on one
-        # worker while the others are idle.
-        ks = list(range(self.k_max, self.k_min - 1, -1))
+        ks = list(range(self.k_min, self.k_max + 1))  # fitted largest first (evaluate_models)
         columns = tuple(range(X.shape[1]))
         table = evaluate_models(
             estimator,

@@ -5,7 +5,7 @@ import pytest
 from scipy.special import logsumexp
 from scipy.stats import multivariate_normal
 
-from skhmmgmr import _em
+from skhmmgmr import _em, _kernels
 from skhmmgmr._em import (
     HMMParameters,
     e_step,
@@ -224,8 +224,11 @@ def test_moment_sums_reduce_directly_only_for_one_or_two_states():
         MomentSums(2, 3, method="einsum")
 
 
+@pytest.mark.parametrize("numpy_exp", [True, False])
 @pytest.mark.parametrize("n_states", [1, 2, 5])
-def test_scaled_densities_match_exp_of_log_densities(n_states):
+def test_scaled_densities_match_exp_of_log_densities(n_states, numpy_exp, monkeypatch):
+    # both paths: NumPy's exp (AVX-512 CPUs) and the compiled one (elsewhere)
+    monkeypatch.setattr(_kernels, "NUMPY_VECTOR_EXP", numpy_exp)
     rng = np.random.default_rng(12)
     n_features = 3
     means, covariances = random_gaussians(rng, n_states, n_features)

@@ -468,3 +468,35 @@ def test_shared_evaluations_reuse_subsets_across_steps_with_the_same_results(dat
     FITS.clear()
     ExhaustiveFeatureSelector(estimator, max_features=1, **params).fit(X, y, groups=groups)
     assert len(FITS) == 4
+
+
+def test_models_are_fitted_longest_first_and_reported_in_their_order(data, monkeypatch):
+    from skhmmgmr import _evaluation
+
+    X, y, groups, cv = data
+    X = X.to_numpy()
+    splits = _evaluation.check_recording_splits(cv, X, y, groups)
+    models = [((0,), {}), ((0, 1, 2), {}), ((1,), {"n_states": 4}), ((0, 1), {}), ((2,), {})]
+    estimator = HMMGMRRegressor(n_states=2, random_state=0)
+    # K (D + 1)^2 + K^2 with D the subset size: 12, 36, 32, 22, 12
+    assert _evaluation.longest_first(estimator, models) == [1, 2, 3, 0, 4]
+
+    fitted = []
+    real = _evaluation._fit_and_evaluate
+
+    def recording_order(**kwargs):
+        fitted.append(kwargs["columns"])
+        return real(**kwargs)
+
+    monkeypatch.setattr(_evaluation, "_fit_and_evaluate", recording_order)
+    table = _evaluation.evaluate_models(
+        estimator, X, y, groups, splits, models, sampling_period=PERIOD
+    )
+    assert fitted == [(0, 1, 2), (1,), (0, 1), (0,), (2,)]
+    assert table["model"].tolist() == sorted(table["model"].tolist())
+    for model_id, (columns, params) in enumerate(models):
+        alone = _evaluation.evaluate_models(
+            estimator, X, y, groups, splits, [(columns, params)], sampling_period=PERIOD
+        )
+        got = table[table["model"] == model_id].drop(columns="model").reset_index(drop=True)
+        pd.testing.assert_frame_equal(got, alone.drop(columns="model"), check_exact=True)
