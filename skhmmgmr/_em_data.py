@@ -197,3 +197,9 @@ class EStepData:
                 sums.add(np.ones((1, hi - lo)), self.data.values, lo)
             self._totals = sums.result()[0]
         return self._totals
+
+    def adopt_totals(self, moments):
+        """Take ``moments`` (augmented, of all rows, computed by the caller anyway) as
+        :attr:`totals` unless they are known already."""
+        if self._totals is None:
+            self._totals = moments

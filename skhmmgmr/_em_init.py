@@ -127,26 +127,52 @@ def _lloyd(X, centers, max_iter, tol):
 
 def _initial_moments(engine, n_states, responsibilities):
     """Moment statistics of the responsibilities ``responsibilities(lo, hi, chunk)`` returns
-    for every chunk of rows, state-major."""
+    for every chunk of rows, state-major.
+
+    Every row's responsibilities sum to one, so the states' moments sum to those of all rows:
+    the engine takes them as its totals (to round-off) instead of a pass of its own.
+    """
     sums = MomentSums(n_states, engine.data.values.shape[0])
     for lo, hi, chunk in engine.chunks():
         sums.add(responsibilities(lo, hi, chunk), engine.data.values, lo)
-    return MomentStatistics(*split_moments(sums.result()), engine.shift)
+    moments = sums.result()
+    engine.adopt_totals(moments.sum(axis=0))
+    return MomentStatistics(*split_moments(moments), engine.shift)
 
 
 def _nearest_centre(centers):
     """Hard responsibilities: every row to its nearest centre (centres about the shift)."""
     n_states = centers.shape[0]
-    half_norms = 0.5 * np.einsum("kf,kf->k", centers, centers)[:, np.newaxis]
+    half_norms = 0.5 * np.einsum("kf,kf->k", centers, centers)
 
     def responsibilities(lo, hi, chunk):
-        # argmin_k ||x - c_k||^2 = argmin_k (||c_k||^2 / 2 - c_k . x)
-        labels = np.argmin(half_norms - centers @ chunk[:-1], axis=0)
-        respT = np.zeros((n_states, hi - lo))
-        respT[labels, np.arange(hi - lo)] = 1.0
+        respT = np.empty((n_states, hi - lo))
+        _nearest_indicators(centers @ chunk[:-1], half_norms, respT)
         return respT
 
     return responsibilities
+
+
+@njit(cache=True, nogil=True)
+def _nearest_indicators(products, half_norms, out):
+    """``out[k, t]`` = 1 for the state ``k`` with the smallest ``half_norms[k] - products[k, t]``
+    (the first on a tie), 0 for the others: ``argmin_k |x_t - c_k|^2`` from ``c_k . x_t``.
+
+    One pass instead of NumPy's subtraction, strided argmin and scatter (9 against 16 ms for
+    504,000 rows, K=2; issue #27).
+    """
+    n_states, n_rows = products.shape
+    for t in range(n_rows):
+        label = 0
+        nearest = half_norms[0] - products[0, t]
+        for k in range(1, n_states):
+            distance = half_norms[k] - products[k, t]
+            if distance < nearest:
+                nearest = distance
+                label = k
+        for k in range(n_states):
+            out[k, t] = 0.0
+        out[label, t] = 1.0
 
 
 def initial_centers(data, n_states, init_params, random_state):

@@ -55,3 +55,40 @@ def test_an_emptied_cluster_is_left_to_sklearn_from_the_same_draws():
     theirs = sklearn_centers(sample, 5, theirs_state)
     np.testing.assert_allclose(ours, theirs, atol=1e-12)
     assert ours_state.randint(1 << 30) == theirs_state.randint(1 << 30)
+
+
+def test_nearest_indicators_pick_the_nearest_centre_first_on_ties():
+    from skhmmgmr._em_init import _nearest_indicators
+
+    rng = np.random.default_rng(2)
+    centers = rng.normal(size=(4, 3))
+    rows = rng.normal(size=(500, 3))
+    rows[:4] = centers  # each exactly on a centre
+    centers[3] = centers[1]  # a duplicate centre: every tie goes to the first
+    half_norms = 0.5 * np.einsum("kf,kf->k", centers, centers)
+    out = np.full((4, 500), np.nan)
+    _nearest_indicators(centers @ rows.T, half_norms, out)
+    distances = ((rows[:, np.newaxis, :] - centers[np.newaxis]) ** 2).sum(axis=2)
+    expected = np.zeros((4, 500))
+    expected[np.argmin(distances, axis=1), np.arange(500)] = 1.0
+    np.testing.assert_array_equal(out, expected)
+    assert out[3].sum() == 0.0  # the duplicate never wins
+
+
+@pytest.mark.parametrize("init_params", ["kmeans", "random"])
+def test_initial_moments_give_the_engine_its_totals(init_params):
+    from skhmmgmr._em import initialize_parameters
+    from skhmmgmr._em_data import EStepData
+    from skhmmgmr._sequences import as_recordings
+
+    rng = np.random.default_rng(4)
+    X = blobs(rng, 3, 4, 3_000)
+    recordings = as_recordings(np.repeat([0, 1, 2], 1_000), len(X))
+    adopted = EStepData(X, recordings, 3)
+    initialize_parameters(
+        None, recordings, 3, init_params, 1e-6, np.random.RandomState(0), engine=adopted
+    )
+    computed = EStepData(X, recordings, 3).totals  # its own pass over the rows
+    # the first moments are about the column means: zero up to round-off
+    np.testing.assert_allclose(adopted.totals, computed, atol=1e-12 * np.abs(computed).max())
+    assert adopted.totals[-1, -1] == len(X)  # the weight of all rows
