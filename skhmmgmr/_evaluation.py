@@ -315,8 +315,9 @@ def evaluate_models(
             for model_id, fold in tasks
         )
         parallel = joblib.Parallel(n_jobs=n_jobs, return_as="generator")
-        # The models are small: BLAS and OpenMP threads (k-means) on them only spin, and
-        # the parallelism is over models (joblib workers get their own limits).
+        # The models are small: BLAS threads on them only spin (as OpenMP's would in the
+        # k-means fallback to scikit-learn), and the parallelism is over models (joblib
+        # workers get their own limits).
         with threadpool_limits(limits=1):
             tables = list(tqdm(parallel(jobs), total=len(tasks), desc=desc, disable=not verbose))
     if not tables:
