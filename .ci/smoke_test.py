@@ -1,7 +1,8 @@
 """Smoke test of an installed skhmmgmr (wheel or sdist), run by .ci/run outside the checkout.
 
-Imports the package, checks the version, fits and predicts on a short simulated recording and
-runs the command line's help. Exits non-zero on any failure.
+Imports the package, checks the version, fits and predicts on a short simulated recording, loads
+the comma2k19 sample that ships as package data (with its licence) and runs the command line's
+help. Exits non-zero on any failure.
 """
 
 import subprocess
@@ -12,7 +13,7 @@ import numpy as np
 
 import skhmmgmr
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr.datasets import make_lane_keeping
+from skhmmgmr.datasets import load_comma2k19_sample, make_lane_keeping
 
 EXPECTED_VERSION = "0.1.0"
 
@@ -42,6 +43,12 @@ def main():
     r2 = model.score(X, y)
     print(f"fit/predict: {X.shape[0]} rows x {X.shape[1]} features, K=2, R^2 = {r2:.3f}")
     check(r2 > 0.5, f"R^2 {r2:.3f} is not above 0.5")
+
+    minute = load_comma2k19_sample()
+    check(minute.shape == (1200, 13), f"comma2k19 sample of shape {minute.shape}, not (1200, 13)")
+    licence = location / "datasets" / "data" / "comma2k19" / "LICENSE"
+    check(licence.is_file() and "comma.ai" in licence.read_text(), f"no comma.ai licence {licence}")
+    print(f"comma2k19 sample: {minute.shape[0]} rows, licence beside it")
 
     # the console script of this environment (beside its python), whatever PATH holds
     executable = Path(sys.executable).with_name("skhmmgmr")

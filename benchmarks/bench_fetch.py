@@ -1,9 +1,9 @@
 """Range reads of comma2k19 against a local HTTP server: bytes and wall time per segment.
 
-Builds a chunk-like archive of ``--segments`` copies of the example segment (from ``shared/``
-beside the checkout), each followed by a stored ``video.hevc`` of ``--video-mb`` random MB as in
-the real chunks, serves it from 127.0.0.1 with the tests' Range-honouring server
-(``tests/_http_server.py``, which counts the bytes it sends) and times:
+Builds a chunk-like archive of ``--segments`` copies of the comma2k19 sample that ships with the
+package (written out as a segment folder), each followed by a stored ``video.hevc`` of
+``--video-mb`` random MB as in the real chunks, serves it from 127.0.0.1 with the tests'
+Range-honouring server (``tests/_http_server.py``, which counts the bytes it sends) and times:
 
 - ``fetch_comma2k19(segments=<one>)`` with range reads (fresh cache each repeat);
 - the same segment with ``method="archive"`` (the whole archive downloaded, verified, unpacked);

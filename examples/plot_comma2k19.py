@@ -4,9 +4,11 @@ Real driving data: who steers, and what one minute can tell
 
 One real minute of the public comma2k19 dataset (comma.ai, MIT licence): a Toyota RAV4 on a
 California highway, with openpilot's lane keeping engaged for part of the minute.
-:func:`skhmmgmr.datasets.load_comma2k19_segment` decodes from the raw CAN frames the driver
-torque, the steering and vehicle-motion signals and, with the extra ``skhmmgmr[can]`` (needed
-here), the signals that tell who steers.
+:func:`skhmmgmr.datasets.load_comma2k19_sample` loads this minute, which ships with the
+package (:func:`~skhmmgmr.datasets.load_comma2k19_segment` reads any other segment folder the
+same way). The loader decodes from the raw CAN frames the driver torque, the steering and
+vehicle-motion signals and, with the extra ``skhmmgmr[can]`` (needed here), the signals that
+tell who steers.
 
 A model of the driver's torque can only learn from the time the driver steers alone: where
 openpilot steers, the power steering turns the wheel and the torque sensor measures something
@@ -16,9 +18,6 @@ one recording out), beside two baselines. The torque sensor reports raw, uncalib
 (not Nm); every torque figure below is in those units.
 """
 
-import os
-from pathlib import Path
-
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
@@ -27,7 +26,7 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr.datasets import RECORDING, TARGET, TIME, load_comma2k19_segment
+from skhmmgmr.datasets import RECORDING, TARGET, TIME, load_comma2k19_sample
 from skhmmgmr.metrics import evaluate_recordings, normalize_performance, smoothness_score
 
 SAMPLING_RATE = 20.0  # Hz
@@ -40,17 +39,6 @@ FLAGS = {
     "openpilot_steer_request": "openpilot\nsteer request",
     "eps_lka_active": "EPS LKA active",
 }
-
-
-def find_segment():
-    """The segment shipped beside the repository (``../shared/data/comma2k19``)."""
-    if "SKHMMGMR_COMMA2K19" in os.environ:
-        return Path(os.environ["SKHMMGMR_COMMA2K19"])
-    for folder in [Path.cwd(), *Path.cwd().parents]:
-        matches = sorted((folder / "shared" / "data" / "comma2k19").glob("*/40"))
-        if matches:
-            return matches[0]
-    raise FileNotFoundError("set SKHMMGMR_COMMA2K19 to a comma2k19 segment folder")
 
 
 def short(recording):
@@ -88,9 +76,8 @@ def runs_of(flag):
     return np.concatenate(([0], np.cumsum(flag[1:] != flag[:-1])))
 
 
-segment = find_segment()
-minute = load_comma2k19_segment(segment, sampling_rate=SAMPLING_RATE, engagement=True)
-driver = load_comma2k19_segment(segment, sampling_rate=SAMPLING_RATE, steering="driver")
+minute = load_comma2k19_sample(sampling_rate=SAMPLING_RATE, engagement=True)
+driver = load_comma2k19_sample(sampling_rate=SAMPLING_RATE, steering="driver")
 # Place every driver span on the minute's time axis (the loader restarts its time at 0).
 minute_origin = minute.attrs["time_origin"][minute[RECORDING].iloc[0]]
 span_origin = driver[RECORDING].map(driver.attrs["time_origin"]) - minute_origin

@@ -1,12 +1,16 @@
-"""Where the tests find the comma2k19 example segment: ``shared/`` beside the checkout (as
-``conftest.py`` finds it), so that the tests run from any clone and skip without it."""
+"""The comma2k19 segment of the tests: the sample that ships with the package, written out once
+per test session as a segment folder (the layout of comma2k19), so that the folder loader, the
+downloads and the damaged-file tests read the same real minute on any clone."""
 
+import atexit
+import shutil
+import tempfile
 from pathlib import Path
 
-import pytest
+from skhmmgmr.datasets._comma2k19_sample import SAMPLE_NAME, SAMPLE_ROUTE, extract_sample
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-ROUTE = "b0c9d2329ad1606b|2018-08-02--08-34-47"
-SEGMENT = SHARED / "data" / "comma2k19" / "b0c9d2329ad1606b--2018-08-02--08-34-47" / "40"
-SEGMENT_NAME = f"{ROUTE}--40"
-needs_segment = pytest.mark.skipif(not SEGMENT.is_dir(), reason="comma2k19 example not present")
+ROUTE = SAMPLE_ROUTE
+SEGMENT_NAME = SAMPLE_NAME
+_FOLDER = Path(tempfile.mkdtemp(prefix="skhmmgmr-comma2k19-"))
+atexit.register(shutil.rmtree, _FOLDER, ignore_errors=True)
+SEGMENT = extract_sample(_FOLDER)

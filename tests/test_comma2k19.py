@@ -4,7 +4,7 @@ import shutil
 
 import numpy as np
 import pytest
-from _comma2k19_data import SEGMENT, SEGMENT_NAME, needs_segment
+from _comma2k19_data import SEGMENT, SEGMENT_NAME
 
 from skhmmgmr.datasets import FEATURE_UNITS, TARGET, load_comma2k19_segment
 from skhmmgmr.datasets._comma2k19_can import decode_big_endian_signal
@@ -117,7 +117,6 @@ def _grid_times(frame):
     return frame.attrs["time_origin"][SEGMENT_NAME] + frame["time"].to_numpy()
 
 
-@needs_segment
 def test_segment_layout_and_units(segment):
     features = [
         "steering_wheel_angle",
@@ -150,7 +149,6 @@ def test_segment_layout_and_units(segment):
     assert np.isfinite(segment.iloc[:, 4:].to_numpy(dtype=float)).all()
 
 
-@needs_segment
 def test_segment_time_grid_is_uniform(segment):
     time = segment["time"].to_numpy()
     assert time[0] == 0.0
@@ -162,7 +160,6 @@ def test_segment_time_grid_is_uniform(segment):
     assert abs(len(half) - len(segment) / 2) <= 1
 
 
-@needs_segment
 def test_steering_angle_agrees_with_processed_signal(segment):
     folder = SEGMENT / "processed_log" / "CAN" / "steering_angle"
     reference = np.deg2rad(
@@ -175,7 +172,6 @@ def test_steering_angle_agrees_with_processed_signal(segment):
     assert np.max(np.abs(angle - reference)) < np.deg2rad(0.2)
 
 
-@needs_segment
 def test_speed_agrees_with_wheel_speeds_decoded_from_can(segment):
     selected = (_raw_can("address") == 0xAA) & (_raw_can("src") == 0)
     data = _raw_can("data")[selected]
@@ -191,7 +187,6 @@ def test_speed_agrees_with_wheel_speeds_decoded_from_can(segment):
     assert speed.min() > 5.0 and speed.max() < 40.0
 
 
-@needs_segment
 def test_vehicle_motion_is_consistent(segment):
     speed = segment["speed"].to_numpy()
     yaw_rate = segment["yaw_rate"].to_numpy()
@@ -218,7 +213,6 @@ def test_vehicle_motion_is_consistent(segment):
     assert np.corrcoef(lateral, centripetal)[0, 1] > 0.6
 
 
-@needs_segment
 def test_derivatives_are_consistent(segment):
     rate = segment["steering_wheel_velocity"].to_numpy()
     acceleration = segment["steering_wheel_acceleration"].to_numpy()
@@ -230,7 +224,6 @@ def test_derivatives_are_consistent(segment):
     assert np.corrcoef(angle_rate, rate)[0, 1] > 0.3
 
 
-@needs_segment
 def test_eps_torque_is_optional():
     frame = load_comma2k19_segment(SEGMENT, eps_torque=True)
     assert list(frame.columns[-2:]) == ["eps_torque", TARGET]
@@ -242,7 +235,6 @@ def test_missing_folder_is_named(tmp_path):
         load_comma2k19_segment(tmp_path / "no_such_segment")
 
 
-@needs_segment
 def test_missing_file_is_named(tmp_path):
     copy = tmp_path / "route" / "40"
     shutil.copytree(SEGMENT, copy)
@@ -251,7 +243,6 @@ def test_missing_file_is_named(tmp_path):
         load_comma2k19_segment(copy)
 
 
-@needs_segment
 def test_segment_without_toyota_frames_is_refused(tmp_path):
     copy = tmp_path / "route" / "40"
     shutil.copytree(SEGMENT, copy)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from _comma2k19_data import SEGMENT, SEGMENT_NAME, needs_segment
+from _comma2k19_data import SEGMENT, SEGMENT_NAME
 
 from skhmmgmr.datasets import _comma2k19_can as can
 from skhmmgmr.datasets import fetch_comma2k19, load_comma2k19_segment
@@ -75,7 +75,6 @@ def test_table_is_the_dbc_definitions():
 
 
 @needs_dbc
-@needs_segment
 def test_dbc_and_table_decode_the_segment_to_the_last_bit():
     dbc, table = can.dbc_decoder(), can.TableDecoder()
     messages = {message for message, _ in can.TABLE}
@@ -91,7 +90,6 @@ def test_dbc_and_table_decode_the_segment_to_the_last_bit():
 
 
 @needs_dbc
-@needs_segment
 def test_loader_gives_the_same_frame_with_and_without_the_extra(monkeypatch):
     assert isinstance(can.can_decoder(), can.DbcDecoder)
     with_dbc = load_comma2k19_segment(SEGMENT, eps_torque=True)
@@ -110,7 +108,6 @@ def test_engagement_options_need_the_extra(without_extra, tmp_path):
         can.TableDecoder().frame_id("EPS_STATUS")
 
 
-@needs_segment
 def test_loader_without_the_extra_uses_the_table(without_extra):
     frame = load_comma2k19_segment(SEGMENT)
     assert len(frame) == 1200 and "cruise_active" not in frame
@@ -135,7 +132,6 @@ def test_invalid_steering_options(options, match, tmp_path):
 
 
 @needs_dbc
-@needs_segment
 def test_engagement_columns_layout(engaged):
     names = list(ENGAGEMENT)
     assert list(engaged.columns[-len(names) - 1 : -1]) == names
@@ -155,7 +151,6 @@ def _held(times, payloads, grid, read):
 
 
 @needs_dbc
-@needs_segment
 def test_engagement_columns_match_the_raw_frames(engaged):
     """Every row, decoded here bit by bit from the DBC's positions (big-endian start bit 8k+j is
     bit j of byte k)."""
@@ -179,7 +174,6 @@ def test_engagement_columns_match_the_raw_frames(engaged):
 
 
 @needs_dbc
-@needs_segment
 def test_engagement_tells_the_story_of_the_segment(engaged):
     """Hand-read from the frames: the driver steers until openpilot engages at 9.02 s (cruise),
     9.04 s (steering request) and 9.06 s (power steering active), then openpilot steers to the
@@ -203,7 +197,6 @@ def test_engagement_tells_the_story_of_the_segment(engaged):
 
 
 @needs_dbc
-@needs_segment
 def test_driver_keeps_only_the_rows_the_driver_steers_alone(engaged):
     driver = load_comma2k19_segment(SEGMENT, engagement=True, steering="driver")
     span = f"{SEGMENT_NAME}/span0"
@@ -225,7 +218,6 @@ def test_driver_keeps_only_the_rows_the_driver_steers_alone(engaged):
 
 
 @needs_dbc
-@needs_segment
 def test_spans_become_separate_recordings():
     """At 100 Hz the short request gaps at 29.03 s and 34.70 s leave driver-alone rows too."""
     full = load_comma2k19_segment(SEGMENT, engagement=True, sampling_rate=100.0)
@@ -250,7 +242,6 @@ def test_spans_become_separate_recordings():
 
 
 @needs_dbc
-@needs_segment
 def test_no_span_long_enough_gives_a_frame_without_rows():
     frame = load_comma2k19_segment(SEGMENT, steering="driver", min_span=30.0)
     assert len(frame) == 0 and frame.attrs["time_origin"] == {}
@@ -276,7 +267,6 @@ def _relabel(folder, address, bus, new_address=0x7FF):
 
 
 @needs_dbc
-@needs_segment
 def test_missing_engagement_message_is_named(copy):
     _relabel(copy, 0x262, 0)
     assert len(load_comma2k19_segment(copy)) == 1200
@@ -285,7 +275,6 @@ def test_missing_engagement_message_is_named(copy):
 
 
 @needs_dbc
-@needs_segment
 def test_segment_without_openpilot_commands(copy):
     """Without the frames openpilot sent, nothing requested steering: the power steering's
     state alone decides which rows the driver steers."""

@@ -17,7 +17,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from _comma2k19_data import ROUTE, SEGMENT, needs_segment
+from _comma2k19_data import ROUTE, SEGMENT
 from _http_server import Server
 
 from skhmmgmr.datasets import _fetch, fetch_comma2k19, load_comma2k19_segment, scan_comma2k19
@@ -30,7 +30,6 @@ try:
 except ImportError:  # Windows
     fcntl = None
 
-pytestmark = needs_segment
 pytest.importorskip("fsspec")
 pytest.importorskip("aiohttp")
 

@@ -4,6 +4,7 @@ from .._panel import to_panel
 from ._base import clear_data_home, get_data_home
 from ._calibration import CALIBRATION_BANDS, THESIS_TABLE_C2, calibration_table
 from ._comma2k19 import load_comma2k19_segment
+from ._comma2k19_sample import load_comma2k19_sample
 from ._comma2k19_scan import scan_comma2k19
 from ._driver import DRIVER_STYLES, DriverParameters
 from ._fetch import COMMA2K19_URL, fetch_comma2k19
@@ -35,6 +36,7 @@ __all__ = [
     "clear_data_home",
     "fetch_comma2k19",
     "get_data_home",
+    "load_comma2k19_sample",
     "load_comma2k19_segment",
     "load_recordings",
     "resample_recordings",

@@ -11,6 +11,7 @@ grid and can keep the spans the driver steers alone, each as a recording of its 
 import math
 import numbers
 import re
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -88,7 +89,7 @@ def check_sampling_rate(sampling_rate):
 _KINDS = {"fiu": "numbers", "iu": "integers", "S": "byte strings"}
 
 
-class _Segment:
+class SegmentFiles:
     """The arrays of a segment folder, checked, with the file and segment named in any error."""
 
     def __init__(self, path):
@@ -97,6 +98,10 @@ class _Segment:
     def fail(self, name, problem):
         raise ValueError(f"The file {name} of the comma2k19 segment {str(self.path)!r} {problem}.")
 
+    def read(self, name):
+        """The array of the file ``name`` (a path relative to the segment), unchecked."""
+        return np.load(self.path / name, allow_pickle=False)
+
     def load(self, name, kinds, *, length_of=None, column=False):
         """Load the array of the file ``name``; check its dtype kind, shape and length.
 
@@ -104,7 +109,7 @@ class _Segment:
         also allows one column of shape (n, 1).
         """
         try:
-            array = np.load(self.path / name, allow_pickle=False)
+            array = self.read(name)
         except (ValueError, EOFError) as exc:
             self.fail(name, f"is not a readable NumPy array (truncated or damaged?): {exc}")
         if not isinstance(array, np.ndarray) or array.dtype.kind not in kinds:
@@ -193,6 +198,49 @@ def check_options(sampling_rate, *, engagement=False, steering="all", min_span=2
     return sampling_rate, float(min_span)
 
 
+# The options of both comma2k19 loaders (the folder's and the bundled sample's), written once
+# and put in each docstring in place of its line "{loader options}".
+LOADER_OPTIONS_DOC = """\
+sampling_rate : float, default=20.0
+    Rate of the output time grid, in Hz, at most 1000. The CAN messages come at about 50 Hz
+    (torque) and 83 Hz (steering, kinematics): a higher rate interpolates, it does not add
+    information.
+recording : str, default=None
+    Recording id of the rows; by default the segment name ``route--segment``, for example
+    ``"b0c9d2329ad1606b|2018-08-02--08-34-47--40"``.
+eps_torque : bool, default=False
+    Whether to add the torque measured by the power-steering motor (``eps_torque``, raw
+    units). It results from the driver's torque and the assistance, so it is left out by
+    default.
+engagement : bool, default=False
+    Whether to add the columns that tell who steers (see Notes), decoded with openpilot's
+    DBC: needs ``skhmmgmr[can]``.
+steering : {"all", "driver"}, default="all"
+    ``"driver"`` keeps only the rows where the driver steers alone: openpilot requests no
+    steering torque and the power steering applies none (``openpilot_steer_request`` and
+    ``eps_lka_active`` both 0). Each run of such rows lasting at least ``min_span`` becomes
+    a recording of its own, ``"<recording>/span<k>"`` (k = 0, 1, ... in time order), so
+    that no filter runs across a removed span; a segment without one gives a frame without
+    rows. Needs ``skhmmgmr[can]``.
+min_span : float, default=2.0
+    Shortest span kept with ``steering="driver"``, in seconds; a span of n rows lasts
+    n / ``sampling_rate``."""
+
+
+def with_loader_options(func):
+    """Decorator: put :data:`LOADER_OPTIONS_DOC` in place of the docstring's ``{loader options}``
+    line, indented as that line is."""
+    lines = []
+    for line in func.__doc__.splitlines(keepends=True):
+        if line.strip() == "{loader options}":
+            indent = line[: len(line) - len(line.lstrip())]
+            line = textwrap.indent(LOADER_OPTIONS_DOC, indent) + "\n"
+        lines.append(line)
+    func.__doc__ = "".join(lines)
+    return func
+
+
+@with_loader_options
 def load_comma2k19_segment(
     path,
     *,
@@ -224,30 +272,7 @@ def load_comma2k19_segment(
     path : str or path-like
         Segment folder, such as ``.../b0c9d2329ad1606b|2018-08-02--08-34-47/40`` (the ``|`` of
         the route folder may also be written ``_`` or ``--``).
-    sampling_rate : float, default=20.0
-        Rate of the output time grid, in Hz, at most 1000. The CAN messages come at about 50 Hz
-        (torque) and 83 Hz (steering, kinematics): a higher rate interpolates, it does not add
-        information.
-    recording : str, default=None
-        Recording id of the rows; by default the segment name ``route--segment``, for example
-        ``"b0c9d2329ad1606b|2018-08-02--08-34-47--40"``.
-    eps_torque : bool, default=False
-        Whether to add the torque measured by the power-steering motor (``eps_torque``, raw
-        units). It results from the driver's torque and the assistance, so it is left out by
-        default.
-    engagement : bool, default=False
-        Whether to add the columns that tell who steers (see Notes), decoded with openpilot's
-        DBC: needs ``skhmmgmr[can]``.
-    steering : {"all", "driver"}, default="all"
-        ``"driver"`` keeps only the rows where the driver steers alone: openpilot requests no
-        steering torque and the power steering applies none (``openpilot_steer_request`` and
-        ``eps_lka_active`` both 0). Each run of such rows lasting at least ``min_span`` becomes
-        a recording of its own, ``"<recording>/span<k>"`` (k = 0, 1, ... in time order), so
-        that no filter runs across a removed span; a segment without one gives a frame without
-        rows. Needs ``skhmmgmr[can]``.
-    min_span : float, default=2.0
-        Shortest span kept with ``steering="driver"``, in seconds; a span of n rows lasts
-        n / ``sampling_rate``.
+    {loader options}
 
     Returns
     -------
@@ -327,7 +352,6 @@ def load_comma2k19_segment(
     sampling_rate, min_span = check_options(
         sampling_rate, engagement=engagement, steering=steering, min_span=min_span
     )
-    need_dbc = bool(engagement) or steering == "driver"
     path = Path(path)
     if not path.is_dir():
         raise FileNotFoundError(f"No comma2k19 segment folder at {str(path)!r}.")
@@ -337,8 +361,22 @@ def load_comma2k19_segment(
             f"The comma2k19 segment folder {str(path)!r} lacks the file(s) {', '.join(missing)}."
         )
     recording = _segment_name(path.resolve()) if recording is None else str(recording)
+    return segment_frame(
+        SegmentFiles(path),
+        recording,
+        sampling_rate=sampling_rate,
+        eps_torque=eps_torque,
+        engagement=engagement,
+        steering=steering,
+        min_span=min_span,
+    )
 
-    segment = _Segment(path)
+
+def segment_frame(segment, recording, *, sampling_rate, eps_torque, engagement, steering, min_span):
+    """The frame of :func:`load_comma2k19_segment` from the arrays of ``segment`` (a folder or
+    an archive), the options already checked by :func:`check_options`."""
+    need_dbc = bool(engagement) or steering == "driver"
+    path = segment.path
     decoder = can_decoder(need_dbc=need_dbc)
     messages = _STEERING_MESSAGES
     if need_dbc:
