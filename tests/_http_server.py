@@ -29,6 +29,13 @@ class RangeHandler(http.server.BaseHTTPRequestHandler):
         path = server.root / unquote(urlsplit(self.path).path).lstrip("/")
         wanted = self.headers.get("Range")
         server.log.append((self.command, self.path, wanted))
+        location = server.redirects.get(unquote(urlsplit(self.path).path))
+        if location is not None:
+            self.send_response(302)
+            self.send_header("Location", location)
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+            return
         if not path.is_file():
             self.send_error(404)
             return
@@ -81,11 +88,13 @@ class Server:
 
     ``sent`` counts the body bytes sent, ``log`` the requests (method, path, Range header);
     ``cut_after`` (bytes, counted over all requests) hangs up once, mid-body; ``ranges=False``
-    ignores Range headers, as a plain file server does.
+    ignores Range headers, as a plain file server does; ``redirects`` maps a path (such as
+    ``"/Chunk_1.zip"``) to the ``Location`` it is redirected to (302).
     """
 
-    def __init__(self, root, *, ranges=True, cut_after=None):
+    def __init__(self, root, *, ranges=True, cut_after=None, redirects=None):
         self.root, self.ranges, self.cut_at = Path(root), ranges, cut_after
+        self.redirects = dict(redirects or {})
         self.sent, self.log, self.lock = 0, [], threading.Lock()
         self.httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), RangeHandler)
         self.httpd.daemon_threads = True

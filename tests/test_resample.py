@@ -220,3 +220,45 @@ def test_load_recordings_keeps_missing_values_on_request_and_drops_short_pieces(
     raw.to_csv(tmp_path / "drive7.csv", index=False)
     with pytest.raises(ValueError, match="'time' holds NaN"):
         load_recordings(tmp_path / "drive7.csv", allow_missing=True)
+
+
+# --- bounded grids (#35) ----------------------------------------------------------------------
+
+
+def test_a_grid_far_denser_than_the_samples_is_refused_before_it_is_built():
+    """Two samples five million seconds apart would give 1e8 grid rows (1 GB per column)."""
+    raw = pd.DataFrame({"recording": "r", "time": [0.0, 5e6], "x": [1.0, 2.0]})
+    with pytest.raises(ValueError, match=r"recording 'r' would take 1e\+08 grid rows.*2 sample"):
+        resample_recordings(raw, 20.0, max_gap=np.inf)
+    # the same samples split at the gap are two one-row pieces
+    split = resample_recordings(raw, 20.0, max_gap=1.0)
+    assert list(split["recording"]) == ["r/0", "r/1"]
+
+
+def test_the_grid_bound_leaves_a_hundredfold_upsampling_alone():
+    raw = pd.DataFrame({"recording": "r", "time": np.arange(500) * 0.1, "x": np.arange(500.0)})
+    dense = resample_recordings(raw, 1000.0, max_gap=1.0)
+    assert len(dense) == 49_901  # 49.9 s at 1 kHz, both ends included
+    np.testing.assert_allclose(dense["x"], dense["time"] * 10.0, atol=1e-9)
+
+
+def test_the_largest_offending_recording_is_named():
+    raw = pd.DataFrame(
+        {
+            "recording": ["ok"] * 3 + ["long"] * 2 + ["longer"] * 2,
+            "time": [0.0, 0.1, 0.2, 0.0, 1e5, 0.0, 1e6],
+            "x": np.arange(7.0),
+        }
+    )
+    with pytest.raises(ValueError, match="'longer' would take 2e\\+07"):
+        resample_recordings(raw, 20.0, max_gap=np.inf)
+
+
+@pytest.mark.parametrize("rate", [1e12, 1000.5, np.float32(5e3)])
+def test_a_rate_above_the_bound_is_refused_everywhere(rate, tmp_path):
+    raw = pd.DataFrame({"recording": "r", "time": [0.0, 0.1], "steering_wheel_angle": [0.0, 1.0]})
+    raw["driver_torque"] = 0.0
+    with pytest.raises(ValueError, match="sampling_rate must be at most 1000 Hz"):
+        resample_recordings(raw, rate, max_gap=1.0)
+    with pytest.raises(ValueError, match="sampling_rate must be at most 1000 Hz"):
+        load_recordings(raw, target="driver_torque", sampling_rate=rate, max_gap=1.0)

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from ._comma2k19_can import can_decoder
-from ._frame import tidy_frame
+from ._frame import check_rate, tidy_frame
 from ._schema import DRIVER, RECORDING, TARGET, TIME
 
 BUS = 0
@@ -28,8 +28,6 @@ DRIVER_NAME = "comma2k19"
 TORQUE_UNIT = "raw sensor units"
 FLAG_UNIT = "flag (0 or 1)"
 _SMOOTHING_SECONDS = 0.25
-# Grids faster than this only interpolate: the CAN messages decoded come at 50 to 83 Hz.
-MAX_SAMPLING_RATE = 1000.0
 STEERING = ("all", "driver")
 
 # Messages read on bus 0, the car's bus, where the EPS, brake and engine ECUs send them.
@@ -69,24 +67,20 @@ def _segment_name(path):
 
 def check_sampling_rate(sampling_rate):
     """Return ``sampling_rate`` as a float, refusing what is not a rate in (0, 1000] Hz."""
-    if (
-        not isinstance(sampling_rate, numbers.Real)
-        or isinstance(sampling_rate, (bool, np.bool_))
-        or not np.isfinite(sampling_rate)
-        or sampling_rate <= 0
-    ):
-        raise ValueError(f"sampling_rate must be a positive number of Hz, got {sampling_rate!r}.")
-    if sampling_rate > MAX_SAMPLING_RATE:
-        raise ValueError(
-            f"sampling_rate must be at most {MAX_SAMPLING_RATE:g} Hz, got {sampling_rate!r}: "
-            "the CAN messages of comma2k19 come at 50 to 83 Hz, so a faster grid only "
-            "interpolates, while its rows and smoothing window grow with the rate (a one-minute "
-            "segment at 100 kHz takes minutes and about 1 GB)."
-        )
-    return float(sampling_rate)
+    return check_rate(
+        sampling_rate,
+        why="the CAN messages of comma2k19 come at 50 to 83 Hz, so a faster grid only "
+        "interpolates, while its rows and smoothing window grow with the rate (a one-minute "
+        "segment at 100 kHz takes minutes and about 1 GB).",
+    )
 
 
 _KINDS = {"fiu": "numbers", "iu": "integers", "S": "byte strings"}
+
+
+class DamagedSegmentError(ValueError):
+    """A file of a segment is unreadable, of the wrong type, shape or length, or holds times
+    that are not finite or go back."""
 
 
 class SegmentFiles:
@@ -96,7 +90,9 @@ class SegmentFiles:
         self.path = path
 
     def fail(self, name, problem):
-        raise ValueError(f"The file {name} of the comma2k19 segment {str(self.path)!r} {problem}.")
+        raise DamagedSegmentError(
+            f"The file {name} of the comma2k19 segment {str(self.path)!r} {problem}."
+        )
 
     def read(self, name):
         """The array of the file ``name`` (a path relative to the segment), unchecked."""

@@ -22,6 +22,11 @@ except ImportError:  # Windows
 
 _CHUNK_SIZE = 1 << 20
 PART = ".part"
+# What an unpacked member may hold unless the caller says less: its size, and for a compressed
+# zip member its size over its compressed size (zlib reaches about 1000 on zeros; measured data
+# and logs stay below 20).
+MAX_MEMBER_SIZE = 1 << 30
+MAX_RATIO = 100.0
 _SHA256 = re.compile(r"^[0-9a-fA-F]{64}$")
 
 
@@ -167,7 +172,7 @@ def list_members(archive):
     raise ValueError(f"{archive} is neither a zip nor a tar archive.")
 
 
-def extract(archive, destinations):
+def extract(archive, destinations, *, max_size=MAX_MEMBER_SIZE, max_ratio=MAX_RATIO):
     """Unpack selected regular files of a zip or tar archive.
 
     Parameters
@@ -178,6 +183,11 @@ def extract(archive, destinations):
     destinations : callable
         Called with the path parts of every regular file; returns the path where the file
         goes, or None to skip it. Links and special files are never unpacked.
+    max_size : int or callable, default=MAX_MEMBER_SIZE
+        The most bytes a member unpacked may hold, or a callable giving it from the member's
+        path parts.
+    max_ratio : float, default=MAX_RATIO
+        The largest unpacked size of a compressed zip member over its compressed size.
 
     Raises
     ------
@@ -186,20 +196,23 @@ def extract(archive, destinations):
         outside the target folder.
     DownloadError
         Naming the member and the archive, when a zip member fails its CRC-32 check or cannot
-        be decompressed.
+        be decompressed, or would unpack to more than ``max_size`` bytes or ``max_ratio``
+        times its compressed size (checked on the sizes the archive declares, before anything
+        is read, and again on the bytes written).
 
     Notes
     -----
     Files are written in place as they come: use :func:`extract_folders` so that a failure
     never leaves a partly unpacked folder where a cache expects a complete one.
     """
+    limit = max_size if callable(max_size) else (lambda parts: max_size)
     if isinstance(archive, zipfile.ZipFile):
-        _extract_zip(archive, destinations, str(archive.filename))
+        _extract_zip(archive, destinations, str(archive.filename), limit, max_ratio)
         return
     archive = Path(archive)
     if zipfile.is_zipfile(archive):
         with zipfile.ZipFile(archive) as zf:
-            _extract_zip(zf, destinations, str(archive))
+            _extract_zip(zf, destinations, str(archive), limit, max_ratio)
         return
     if tarfile.is_tarfile(archive):
         with tarfile.open(archive) as tf:
@@ -209,23 +222,48 @@ def extract(archive, destinations):
                     continue
                 target = destinations(parts)
                 if target is not None:
-                    _copy_member(tf.extractfile(member), target)
+                    cap = _check_member(member.name, str(archive), member.size, limit(parts))
+                    _copy_member(tf.extractfile(member), target, cap, member.name, str(archive))
         return
     raise ValueError(f"{archive} is neither a zip nor a tar archive.")
 
 
-def _extract_zip(zf, destinations, name):
+def _check_member(member, archive, size, cap, compressed=None, max_ratio=None):
+    """Refuse a member whose declared unpacked size is over ``cap`` bytes, or (compressed)
+    over ``max_ratio`` times its compressed size; return the bytes it may write."""
+    if size > cap:
+        raise DownloadError(
+            f"The member {member!r} of the archive {archive!r} would unpack to {size} bytes, "
+            f"more than the {cap} such a member may hold: refusing the archive (a damaged or "
+            "hostile file); nothing of it was kept."
+        )
+    if compressed is not None and size > max_ratio * max(compressed, 1):
+        raise DownloadError(
+            f"The member {member!r} of the archive {archive!r} would unpack to {size} bytes "
+            f"from {compressed}, {size / max(compressed, 1):.0f} times its compressed size "
+            f"(at most {max_ratio:g}): refusing the archive (a compression bomb?); nothing of it "
+            "was kept."
+        )
+    return size
+
+
+def _extract_zip(zf, destinations, name, limit, max_ratio):
     for info in zf.infolist():
         if info.is_dir():
             continue
         # A zip written on Unix can mark a member as a symbolic link.
         if (info.external_attr >> 16) & 0o170000 == 0o120000:
             continue
-        target = destinations(member_parts(info.filename, Path(name).name))
+        parts = member_parts(info.filename, Path(name).name)
+        target = destinations(parts)
         if target is None:
             continue
+        compressed = None if info.compress_type == zipfile.ZIP_STORED else info.compress_size
+        cap = _check_member(
+            info.filename, name, info.file_size, limit(parts), compressed, max_ratio
+        )
         try:
-            _copy_member(zf.open(info), target)
+            _copy_member(zf.open(info), target, cap, info.filename, name)
         except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
             raise DownloadError(
                 f"The member {info.filename!r} of the archive {name!r} is damaged ({exc}); "
@@ -233,11 +271,27 @@ def _extract_zip(zf, destinations, name):
             ) from exc
 
 
-def _copy_member(source, target):
+def _copy_member(source, target, cap, member, archive):
+    """Copy ``source`` to ``target`` in blocks, refusing more than ``cap`` bytes."""
     target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with source, open(target, "wb") as out:
-        shutil.copyfileobj(source, out, _CHUNK_SIZE)
+    written = 0
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        out = open(target, "wb")  # noqa: SIM115 (closed below; open's own errors named here)
+    except OSError as exc:  # a name too long, a file where a folder must be, a full disk
+        raise DownloadError(
+            f"Cannot unpack the member {member!r} of the archive {archive!r}: "
+            f"{exc.strerror or exc}; nothing of the archive was kept."
+        ) from exc
+    with source, out:
+        while block := source.read(_CHUNK_SIZE):
+            written += len(block)
+            if written > cap:
+                raise DownloadError(
+                    f"The member {member!r} of the archive {archive!r} unpacks to more than the "
+                    f"{cap} bytes it declares: refusing the archive; nothing of it was kept."
+                )
+            out.write(block)
 
 
 @contextmanager
@@ -273,7 +327,7 @@ def atomic_open(path, mode="w", *, suffix=""):
         raise
 
 
-def extract_folders(archive, root, folder_of):
+def extract_folders(archive, root, folder_of, *, max_size=MAX_MEMBER_SIZE, max_ratio=MAX_RATIO):
     """Unpack members of an archive into folders of ``root``, each renamed into place whole.
 
     Parameters
@@ -286,6 +340,9 @@ def extract_folders(archive, root, folder_of):
         Called with the path parts of every regular file of the archive; returns the folder
         (relative to ``root``) the file belongs to and its path parts inside that folder, or
         None to skip the file.
+    max_size, max_ratio
+        What a member may hold, see :func:`extract`; a member over them refuses the whole
+        archive and nothing is kept.
 
     Notes
     -----
@@ -306,7 +363,7 @@ def extract_folders(archive, root, folder_of):
             folders.setdefault(folder)
             return (tmp / folder).joinpath(*inside)
 
-        extract(archive, destination)
+        extract(archive, destination, max_size=max_size, max_ratio=max_ratio)
         for folder in folders:
             final = root / folder
             final.parent.mkdir(parents=True, exist_ok=True)

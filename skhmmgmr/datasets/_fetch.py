@@ -10,6 +10,8 @@ verification and unpacking helpers are in :mod:`._download`.
 
 import numbers
 import re
+import reprlib
+import shutil
 import time
 import warnings
 import zipfile
@@ -19,7 +21,12 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 from ._base import get_data_home
-from ._comma2k19 import ROUTE_PATTERN, check_options, load_comma2k19_segment
+from ._comma2k19 import (
+    ROUTE_PATTERN,
+    DamagedSegmentError,
+    check_options,
+    load_comma2k19_segment,
+)
 from ._download import (
     atomic_open,
     check_zip,
@@ -43,11 +50,24 @@ N_CHUNKS = 10
 METHODS = ("range", "archive")
 # Folders of a segment that range reads fetch: the loader's inputs, not the video.
 RANGE_FOLDERS = ("processed_log", "global_pose")
-# Segments whose members are fetched at once (concurrent requests; at most about 80 MB held).
+# Segments whose members are fetched at once (concurrent requests).
 _BATCH = 8
+# What a member of a segment may hold unpacked: a minute of video is about 50 MB, every other
+# file a minute of one signal (the CAN log's arrays, the largest, about 1 MB each).
+_VIDEO_SIZE = 256 << 20
+_FILE_SIZE = 64 << 20
+
+
+def member_cap(parts):
+    """The most bytes the segment member with path parts ``parts`` may unpack to."""
+    return _VIDEO_SIZE if parts[-1].endswith(".hevc") else _FILE_SIZE
+
+
+# Segment numbers: a route's minutes, 0 to a few hundred; longer runs of digits are no segment.
+_MAX_DIGITS = 6
 _SEGMENT_ID = re.compile(
     r"^(?P<dongle>[0-9a-f]{16})(?:\||_|--)(?P<start>\d{4}-\d\d-\d\d--\d\d-\d\d-\d\d)"
-    r"(?:/|--)(?P<number>\d+)/?$"
+    rf"(?:/|--)(?P<number>\d{{1,{_MAX_DIGITS}}})/?$"
 )
 
 
@@ -56,7 +76,7 @@ def segment_key(identifier):
     match = _SEGMENT_ID.match(str(identifier))
     if match is None:
         raise ValueError(
-            f"{identifier!r} is not a comma2k19 segment identifier such as "
+            f"{reprlib.repr(identifier)} is not a comma2k19 segment identifier such as "
             "'b0c9d2329ad1606b|2018-08-02--08-34-47/40' (or '...--40')."
         )
     return match["dongle"], match["start"], str(int(match["number"]))
@@ -66,7 +86,7 @@ def _key_of_member(parts):
     """Return (segment key, path inside the segment) of an archive member, or None."""
     for i in range(len(parts) - 2):
         match = ROUTE_PATTERN.match(parts[i])
-        if match and parts[i + 1].isdigit():
+        if match and parts[i + 1].isdigit() and len(parts[i + 1]) <= _MAX_DIGITS:
             key = match["dongle"], match["start"], str(int(parts[i + 1]))
             return key, parts[i + 2 :]
     return None
@@ -129,7 +149,7 @@ def unpack_segments(archive, reader, root, members, *, progress=False, desc=None
                 infos = [info for key in batch for info, _, _ in members[key]]
                 reader.prefetch(member_ranges(archive, infos))
             try:
-                extract_folders(archive, root, where.get)
+                extract_folders(archive, root, where.get, max_size=member_cap)
             finally:
                 if reader is not None:
                     reader.clear()
@@ -362,11 +382,16 @@ def fetch_comma2k19(
     into place only once complete and verified (checksum when known, and always the zip
     archive's central directory and the CRC of every member); a failed check deletes it. A
     cached archive that is not a readable zip archive is downloaded again. Archive members that
-    would land outside the cache folder are refused.
+    would land outside the cache folder are refused, and so is an archive with a member that
+    would unpack to more than such a file may hold (256 MB for a video, 64 MB for any other
+    file; a compressed member to more than 100 times its compressed size), naming the member;
+    nothing of it is kept. A cached segment whose files the loader refuses as damaged is
+    removed from the cache (the error says so), so that the next call fetches it again.
 
-    With range reads each segment costs its members (about 5 MB for the example segment) plus a
-    few requests; the members of 8 segments at a time are fetched concurrently. See the user
-    guide (:doc:`/user_guide/comma2k19`) for measured times.
+    With range reads each segment costs its members (about 5 MB for a whole segment's logs)
+    plus a few requests; the members of 8 segments at a time are fetched concurrently, in
+    requests of at most 4 MB, at most 16 MB of them held in memory at once (the rest waits in
+    a temporary file). See the user guide (:doc:`/user_guide/comma2k19`) for measured times.
 
     Examples
     --------
@@ -416,19 +441,30 @@ def fetch_comma2k19(
                 f"{', '.join(map(str, chunk_numbers))}."
             )
 
-    parts = [
-        load_comma2k19_segment(
-            segment_folder(root, k),
-            sampling_rate=sampling_rate,
-            recording=segment_name(k),
-            eps_torque=eps_torque,
-            engagement=engagement,
-            steering=steering,
-            min_span=min_span,
-        )
-        for k in keys
-    ]
+    loader_options = {
+        "sampling_rate": sampling_rate,
+        "eps_torque": eps_torque,
+        "engagement": engagement,
+        "steering": steering,
+        "min_span": min_span,
+    }
+    parts = [_load_cached(root, k, loader_options) for k in keys]
     if not parts:
         raise ValueError(f"The comma2k19 chunk(s) {chunk_numbers} hold no segment.")
     origins = {k: v for p in parts for k, v in p.attrs["time_origin"].items()}
     return concat_frames(parts, attrs={"time_origin": origins})
+
+
+def _load_cached(root, key, loader_options):
+    """Load a segment of the cache; a segment the loader refuses as damaged (a file missing,
+    unreadable, of the wrong type or length) is removed from the cache, so that the next call
+    fetches it again instead of failing on the same files."""
+    folder = segment_folder(root, key)
+    try:
+        return load_comma2k19_segment(folder, recording=segment_name(key), **loader_options)
+    except (DamagedSegmentError, FileNotFoundError) as exc:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise type(exc)(
+            f"{exc} The segment's folder was removed from the cache: the next call fetches it "
+            "again."
+        ) from exc

@@ -155,8 +155,14 @@ def time_order(recording, time=None):
     return np.lexsort((np.asarray(time, dtype=float), codes))
 
 
-def check_rate(sampling_rate, *, optional=False):
-    """Refuse a sampling rate that is not a positive, finite number of Hz (a bool included).
+# Recordings for a driver model are sampled at tens to hundreds of Hz; a faster grid only
+# interpolates, while its rows (and the memory of every array built on them) grow with the rate.
+MAX_SAMPLING_RATE = 1000.0
+
+
+def check_rate(sampling_rate, *, optional=False, why=""):
+    """Refuse a sampling rate that is not a positive, finite number of Hz (a bool included), or
+    is above :data:`MAX_SAMPLING_RATE`; return it as a float (or None).
 
     Parameters
     ----------
@@ -164,6 +170,9 @@ def check_rate(sampling_rate, *, optional=False):
         The rate to check [Hz].
     optional : bool, default=False
         Whether None is accepted.
+    why : str, default=""
+        What a faster rate would do with this source, added to the error of a rate above the
+        bound.
 
     Raises
     ------
@@ -171,9 +180,9 @@ def check_rate(sampling_rate, *, optional=False):
         Naming the rate given.
     """
     if optional and sampling_rate is None:
-        return
+        return None
     if (
-        isinstance(sampling_rate, bool)
+        isinstance(sampling_rate, (bool, np.bool_))
         or not isinstance(sampling_rate, (int, float, np.number))
         or not np.isfinite(sampling_rate)
         or sampling_rate <= 0
@@ -182,6 +191,16 @@ def check_rate(sampling_rate, *, optional=False):
         raise ValueError(
             f"sampling_rate must be {either}a positive number of Hz, got {sampling_rate!r}."
         )
+    if sampling_rate > MAX_SAMPLING_RATE:
+        raise ValueError(
+            f"sampling_rate must be at most {MAX_SAMPLING_RATE:g} Hz, got {sampling_rate!r}: "
+            + (
+                why
+                or "a faster grid only interpolates the samples, while its rows and memory "
+                "grow with the rate."
+            )
+        )
+    return float(sampling_rate)
 
 
 def check_times(recording, time, *, names=(RECORDING, TIME)):

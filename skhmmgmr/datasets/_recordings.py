@@ -222,7 +222,7 @@ def load_recordings(
     sampling_rate : float, default=None
         If given without ``max_gap``, check that every recording is sampled at this rate
         (steps within 1 % of ``1 / sampling_rate``); recordings are then never resampled. With
-        ``max_gap``, the rate of the grid the recordings are resampled to.
+        ``max_gap``, the rate of the grid the recordings are resampled to. At most 1000 Hz.
     max_gap : float, default=None
         If given, put every recording on a uniform grid at ``sampling_rate`` with
         :func:`resample_recordings`: gaps up to ``max_gap`` seconds between samples are

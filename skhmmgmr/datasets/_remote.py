@@ -10,10 +10,12 @@ the end of the archive and its central directory (a few requests, about 150 byte
 The byte ranges of the members wanted, each from its local header to the next member's (so
 the local header, its extra field and any data descriptor are inside), are then fetched at once
 with fsspec's ``cat_ranges`` (concurrent requests over HTTP; ranges less than 64 KiB apart
-merged into one) and kept in memory, so that reading the members costs no further request
-(fsspec's own "parts" cache is filled only when a file is opened, and its answer to a read
-outside the parts differs between fsspec versions, hence the reader keeps them itself). Every
-member read is checked against the CRC-32 of the central directory by zipfile itself.
+merged into one, and cut into requests of at most 4 MiB) and written to a temporary file as
+they come, at most 16 MiB held in memory at once whatever the members' size, so that reading
+the members costs no further request (fsspec's own "parts" cache is filled only when a file is
+opened, holds the parts in memory, and its answer to a read outside the parts differs between
+fsspec versions, hence the reader keeps them itself). Every member read is checked against the
+CRC-32 of the central directory by zipfile itself.
 
 Downloads (:func:`download`) go to a hidden ``.<name>.part`` file beside the target, in blocks
 of 16 MiB, each one Range request; an interrupted download (cut connection, timeout, Ctrl-C)
@@ -28,6 +30,7 @@ import hashlib
 import importlib
 import os
 import re
+import tempfile
 import time
 import zipfile
 from contextlib import contextmanager, suppress
@@ -42,6 +45,10 @@ from ._download import PART, DownloadError, check_sha256, file_url, lock, remove
 SCHEMES = ("http", "https", "file", "hf")
 _BLOCK = 16 << 20
 _MAX_GAP = 64 << 10
+# Prefetched ranges: bytes of one request, and of the requests held in memory at once (then
+# written to the reader's temporary file).
+_PREFETCH_REQUEST = 4 << 20
+_PREFETCH_HELD = 16 << 20
 # A Hub dataset file: <endpoint>/datasets/<owner>/<name>/resolve/<revision>/<path>, or its
 # hf://datasets/<owner>/<name>[@<revision>]/<path> form.
 _HUB_URL = re.compile(
@@ -97,16 +104,62 @@ def network_errors():
     return errors
 
 
-def failure(url, exc, timeout):
-    """The DownloadError naming ``url`` for a network or server error ``exc``."""
-    if isinstance(exc, DownloadError):
-        return exc
-    reason = exc
+def _causes(exc):
+    """``exc`` and the exceptions it was raised from, outermost first."""
+    seen = []
+    while exc is not None and exc not in seen:
+        seen.append(exc)
+        exc = exc.__cause__ or exc.__context__
+    return seen
+
+
+def is_not_found(exc):
+    """Whether the failure ``exc`` means the server has no such file (and nothing worse)."""
+    causes = _causes(exc)
+    statuses = [getattr(c, "status", None) for c in causes if getattr(c, "status", None)]
+    return (
+        any(isinstance(c, FileNotFoundError) for c in causes)
+        and all(s == 404 for s in statuses)
+        and not any(_kind(c) in _REASONS for c in causes)
+    )
+
+
+# What a few of aiohttp's errors mean (their text names only the URL), by class name.
+_REASONS = {
+    "TooManyRedirects": "too many redirects (the server redirects in a loop)",
+    "NonHttpUrlRedirectClientError": "redirected to {text}, which is not an http(s) URL: refused",
+    "InvalidUrlRedirectClientError": "redirected to an invalid URL, {text}",
+}
+
+
+def _kind(exc):
+    return next((c.__name__ for c in type(exc).__mro__ if c.__name__ in _REASONS), None)
+
+
+def _reason(url, exc, timeout):
+    """What went wrong, in words: the innermost known cause of ``exc``, else its own text."""
+    for cause in reversed(_causes(exc)):
+        kind = _kind(cause)
+        if kind is not None:
+            return _REASONS[kind].format(text=str(cause))
+        status = getattr(cause, "status", None)
+        if isinstance(status, int) and status >= 400:
+            return f"the server answered HTTP {status} {getattr(cause, 'message', '')}".strip()
     if isinstance(exc, TimeoutError):
-        reason = f"timed out, no answer within timeout={timeout} s" + (
+        return f"timed out, no answer within timeout={timeout} s" + (
             f" ({exc})" if str(exc) else ""
         )
-    return DownloadError(f"Cannot download {url!r}: {str(reason).rstrip('.')}.")
+    text = str(exc).strip().rstrip(".")
+    if isinstance(exc, FileNotFoundError) and text in ("", url, repr(url)):
+        return "no such file on the server (HTTP 404 or a missing local file)"
+    return text if text and text != url else f"{type(exc).__name__} {text}".strip()
+
+
+def failure(url, exc, timeout):
+    """The DownloadError naming ``url`` and the reason for a network or server error ``exc``."""
+    if isinstance(exc, DownloadError):
+        return exc
+    return DownloadError(f"Cannot download {url!r}: {_reason(url, exc, timeout).rstrip('.')}.")
 
 
 @contextmanager
@@ -119,8 +172,8 @@ def naming(url, timeout):
 
 
 class RangeReader:
-    """A seekable, read-only remote file: reads in fetched ranges come from memory, others from
-    the server (one Range request each).
+    """A seekable, read-only remote file: reads in prefetched ranges come from a temporary file,
+    others from the server (one Range request each).
 
     Parameters
     ----------
@@ -140,29 +193,51 @@ class RangeReader:
         with naming(url, timeout):
             self.size = _size(fs, path, url)
             self._file = fs.open(path, "rb", size=self.size, cache_type="none")
+        # start of every prefetched range -> (its offset in the spool file, its length)
         self._parts = {}
         self._starts = []
+        self._spool = None
         self._pos = 0
         self.failure = None
 
     def prefetch(self, ranges):
-        """Fetch the byte ranges ``[(start, end), ...]`` (end excluded) at once and keep them."""
+        """Fetch the byte ranges ``[(start, end), ...]`` (end excluded) and keep them on disk:
+        concurrent requests of at most ``_PREFETCH_REQUEST`` bytes, ``_PREFETCH_HELD`` bytes of
+        them in memory at once."""
         if not ranges:
             return
         from fsspec.utils import merge_offset_ranges
 
         starts, ends = zip(*sorted(ranges), strict=True)
-        paths, starts, ends = merge_offset_ranges(
+        _, starts, ends = merge_offset_ranges(
             [self._path] * len(starts), list(starts), list(ends), max_gap=_MAX_GAP
         )
-        with naming(self.name, self.timeout):
-            blobs = self._fs.cat_ranges(paths, starts, ends)
-            for blob in blobs:
-                if isinstance(blob, BaseException):
-                    raise blob
-        for start, end, blob in zip(starts, ends, blobs, strict=True):
-            self._check(start, end, blob)
-            self._parts[start] = blob
+        if self._spool is None:
+            # closed by close(), which remote_zip calls on every way out
+            self._spool = tempfile.TemporaryFile(prefix="skhmmgmr-ranges-")  # noqa: SIM115
+        requests = [
+            (a, min(a + _PREFETCH_REQUEST, end))
+            for start, end in zip(starts, ends, strict=True)
+            for a in range(start, end, _PREFETCH_REQUEST)
+        ]
+        offsets = {}
+        for group in _groups(requests, _PREFETCH_HELD):
+            with naming(self.name, self.timeout):
+                blobs = self._fs.cat_ranges(
+                    [self._path] * len(group), [a for a, _ in group], [b for _, b in group]
+                )
+                for blob in blobs:
+                    if isinstance(blob, BaseException):
+                        raise blob
+            self._spool.seek(0, os.SEEK_END)
+            for (a, b), blob in zip(group, blobs, strict=True):
+                self._check(a, b, blob)
+                offsets[a] = self._spool.tell()
+                self._spool.write(blob)
+            del blobs
+        # the requests of a range were written one after the other: the range is one stretch
+        for start, end in zip(starts, ends, strict=True):
+            self._parts[start] = offsets[start], end - start
         self._starts = sorted(self._parts)
 
     def _check(self, start, end, data):
@@ -174,18 +249,22 @@ class RangeReader:
             )
 
     def clear(self):
-        """Forget the fetched ranges."""
+        """Forget the fetched ranges (and free their room on disk)."""
         self._parts.clear()
         self._starts = []
+        if self._spool is not None:
+            self._spool.seek(0)
+            self._spool.truncate()
 
     def read(self, size=-1):
         end = self.size if size is None or size < 0 else min(self.size, self._pos + size)
         i = bisect.bisect_right(self._starts, self._pos) - 1
         if i >= 0:
             start = self._starts[i]
-            part = self._parts[start]
-            if end <= start + len(part):
-                out = part[self._pos - start : end - start]
+            offset, length = self._parts[start]
+            if end <= start + length:
+                self._spool.seek(offset + self._pos - start)
+                out = self._spool.read(end - self._pos)
                 self._pos = end
                 return out
         try:
@@ -214,7 +293,23 @@ class RangeReader:
 
     def close(self):
         self.clear()
+        if self._spool is not None:
+            self._spool.close()
         self._file.close()
+
+
+def _groups(requests, budget):
+    """The ``(start, end)`` requests in consecutive groups of at most ``budget`` bytes (a
+    request larger than that alone)."""
+    group, held = [], 0
+    for a, b in requests:
+        if group and held + (b - a) > budget:
+            yield group
+            group, held = [], 0
+        group.append((a, b))
+        held += b - a
+    if group:
+        yield group
 
 
 @contextmanager
@@ -237,7 +332,15 @@ def remote_zip(url, *, timeout):
 
 def member_ranges(archive, infos):
     """The byte range of each member of ``infos`` in ``archive``: from its local header to the
-    next member's (or the central directory)."""
+    next member's (or the central directory); DownloadError naming a member whose header the
+    central directory places at or after itself."""
+    for info in infos:
+        if not 0 <= info.header_offset < archive.start_dir:
+            raise DownloadError(
+                f"The central directory of {str(archive.filename)!r} places the member "
+                f"{info.filename!r} at byte {info.header_offset}, outside the members (which "
+                f"end at byte {archive.start_dir}): the archive is damaged."
+            )
     offsets = sorted({i.header_offset for i in archive.infolist()} | {archive.start_dir})
     return [
         (i.header_offset, offsets[bisect.bisect_right(offsets, i.header_offset)]) for i in infos
@@ -303,9 +406,12 @@ def read_manifest(base_url, name="SHA256SUMS", *, timeout=60.0):
     fs, path = remote_fs(url, timeout)
     try:
         with naming(url, timeout):
-            text = fs.cat_file(path).decode("utf-8")
+            data = fs.cat_file(path)
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"The manifest {url!r} is not UTF-8 text ({exc}).") from None
     except DownloadError as exc:
-        if isinstance(exc.__cause__, FileNotFoundError):
+        if is_not_found(exc):
             return None
         raise
     checksums = {}
@@ -313,10 +419,15 @@ def read_manifest(base_url, name="SHA256SUMS", *, timeout=60.0):
         if not line.strip() or line.lstrip().startswith("#"):
             continue
         parts = line.split(maxsplit=1)
-        if len(parts) != 2:
-            raise ValueError(f"Line {line_number} of the manifest {url!r} is malformed: {line!r}.")
-        digest, file_name = parts
-        checksums[file_name.strip().lstrip("*")] = check_sha256(digest, file_name)
+        try:
+            if len(parts) != 2:
+                raise ValueError("it is not '<SHA-256> <file name>'")
+            digest, file_name = parts
+            checksums[file_name.strip().lstrip("*")] = check_sha256(digest, file_name)
+        except ValueError as exc:
+            raise ValueError(
+                f"Line {line_number} of the manifest {url!r} is malformed ({exc}): {line[:200]!r}."
+            ) from None
     return checksums
 
 

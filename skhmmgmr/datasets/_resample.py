@@ -32,6 +32,11 @@ from ._frame import check_rate, check_times
 from ._schema import DRIVER, RECORDING, SETTING, SPLIT, TIME
 
 SEPARATOR = "/"
+# Bounds of the grid: a piece gets at most this many grid rows per sample (a 10 Hz log on a
+# 1000 Hz grid), or MIN_GRID_ROWS for a short piece; all pieces at most MAX_GRID_ROWS.
+MAX_ROWS_PER_SAMPLE = 100
+MIN_GRID_ROWS = 10_000
+MAX_GRID_ROWS = 1_000_000_000
 _LABELS = (DRIVER, SETTING, SPLIT)  # meta columns held whatever their dtype
 
 
@@ -91,7 +96,7 @@ def resample_recordings(
         times strictly increasing (sort them with :func:`load_recordings` or
         ``frame.sort_values([recording, time])``).
     sampling_rate : float
-        Rate of the grid [Hz].
+        Rate of the grid [Hz], at most 1000.
     max_gap : float
         The longest step between two consecutive samples of a recording that is interpolated
         [s]; a longer step splits the recording. At least one period ``1 / sampling_rate``;
@@ -122,7 +127,10 @@ def resample_recordings(
     Raises
     ------
     ValueError
-        When ``sampling_rate`` is not a positive number, ``max_gap`` is shorter than one period,
+        When ``sampling_rate`` is not a positive number of at most 1000 Hz, ``max_gap`` is
+        shorter than one period, a piece would take more than 100 grid rows per sample (at
+        least 10,000; named with its recording and size, before any row is built) or the grid
+        more than 1e9 rows in all,
         a column is missing, a piece would take the id of an existing recording, or, naming the
         recording, the row (its position in ``frame``, from 0) and its time: a recording id is
         missing, a time is NaN or infinite, the rows of a recording are not contiguous, or its
@@ -189,7 +197,7 @@ def resample_recordings(
         return frame.reset_index(drop=True)
 
     ids, codes, t = check_times(frame[recording], frame[time], names=(recording, time))
-    grid = _Grid(t, codes, sampling_rate, max_gap)
+    grid = _Grid(t, codes, ids, sampling_rate, max_gap)
     labels = _piece_ids(ids, codes, grid.start)
     keep = grid.n_grid >= min_length
     if not keep.all():
@@ -218,7 +226,7 @@ def resample_recordings(
 class _Grid:
     """The pieces of the recordings and, for every grid row, where its values come from."""
 
-    def __init__(self, t, codes, sampling_rate, max_gap):
+    def __init__(self, t, codes, ids, sampling_rate, max_gap):
         n_rows = len(t)
         tol = 1e-9 / sampling_rate + 4 * np.spacing(np.abs(t).max())
         step = np.diff(t)
@@ -226,7 +234,9 @@ class _Grid:
         self.start = np.flatnonzero(first)
         stop = np.r_[self.start[1:], n_rows]
         span = t[stop - 1] - t[self.start]
-        self.n_grid = np.floor((span + tol) * sampling_rate).astype(np.int64) + 1
+        n_grid = np.floor((span + tol) * sampling_rate) + 1  # float: checked before it is used
+        _check_grid_size(n_grid, stop - self.start, span, ids[self.start], sampling_rate)
+        self.n_grid = n_grid.astype(np.int64)
         self.piece = np.repeat(np.arange(len(self.start)), self.n_grid)
         offset = np.cumsum(self.n_grid) - self.n_grid
         k = np.arange(self.n_grid.sum()) - offset[self.piece]
@@ -250,6 +260,29 @@ class _Grid:
         with np.errstate(invalid="ignore"):
             between = a + self.weight * (b - a)
         return np.where(self.exact, a, between)
+
+
+def _check_grid_size(n_grid, n_samples, span, owners, sampling_rate):
+    """Refuse a grid with more than :data:`MAX_ROWS_PER_SAMPLE` rows per sample of its piece
+    (at least :data:`MIN_GRID_ROWS`), or more than :data:`MAX_GRID_ROWS` rows in all, naming
+    the recording, its samples and the rows it would take, before any row is built."""
+    allowed = np.maximum(MAX_ROWS_PER_SAMPLE * n_samples, MIN_GRID_ROWS)
+    over = np.flatnonzero(n_grid > allowed)
+    if over.size:
+        p = over[np.argmax(n_grid[over])]
+        raise ValueError(
+            f"The recording {owners[p]!r} would take {n_grid[p]:.4g} grid rows at "
+            f"{sampling_rate:g} Hz: {n_samples[p]} sample(s) over {span[p]:.6g} s, more than "
+            f"{MAX_ROWS_PER_SAMPLE} grid rows per sample. Between two samples resampling only "
+            "interpolates: split long gaps with a finite max_gap, or lower sampling_rate."
+        )
+    total = n_grid.sum()
+    if total > MAX_GRID_ROWS:
+        raise ValueError(
+            f"The grid would take {total:.4g} rows in all at {sampling_rate:g} Hz (at most "
+            f"{MAX_GRID_ROWS:.0e}, about {MAX_GRID_ROWS * 8 / 2**30:.0f} GiB per float "
+            "column): resample the recordings in parts, or lower sampling_rate."
+        )
 
 
 def _piece_ids(ids, codes, start):
