@@ -20,6 +20,8 @@ transition matrix, ``alpha_t A^h``, and mixes per-state outputs (see
 :meth:`AdaptMixin.predict_ahead`).
 """
 
+import math
+import numbers
 from dataclasses import replace
 
 import numpy as np
@@ -241,7 +243,7 @@ class AdaptMixin:
         ----------
         X : array-like of shape (n_samples, n_features)
         steps : int
-            Horizon in rows (``seconds * sampling_rate``), >= 0.
+            Horizon in rows (``seconds * sampling_rate``), from 0 to 1e9.
         groups : array-like of shape (n_samples,), default=None
             Recording id of every row; the filter restarts at every recording.
         time : array-like of shape (n_samples,), default=None
@@ -274,13 +276,12 @@ class AdaptMixin:
             raise ValueError(
                 f"state_output must be 'marginal' or 'conditional', got {state_output!r}"
             )
-        if int(steps) != steps or steps < 0:
-            raise ValueError(f"steps must be an integer >= 0, got {steps!r}")
+        steps = check_steps(steps)
         # The rows in filter order, read once (with their missing values) for both steps.
         standardized, recordings, rows, missing = read_inputs(self, X, groups, time)
         model = self.model_
         alpha = filter_state_probabilities(standardized, recordings, model.gmr, missing=missing)
-        ahead = alpha @ np.linalg.matrix_power(model.transmat, int(steps))
+        ahead = alpha @ transition_power(model.transmat, steps)
         if steps == 0 or state_output == "conditional":
             estimate, std = gmr_estimates(standardized, ahead, model.gmr, return_std, missing)
         else:
@@ -291,6 +292,43 @@ class AdaptMixin:
             return estimate
         std = model.standardization.output_std(std)
         return estimate, rows.to_caller_order(std[:, 0] if model.scalar_output else std)
+
+
+# Forecast horizons in rows: a billion rows is 116 days at 100 Hz, far past the time the state
+# probabilities take to reach the chain's stationary distribution.
+MAX_STEPS = 10**9
+
+
+def check_steps(steps):
+    """``steps`` as an int, refusing what is not a whole number of rows in [0, MAX_STEPS]."""
+    if isinstance(steps, (bool, np.bool_)) or not isinstance(steps, numbers.Real):
+        raise ValueError(f"steps must be a whole number of rows >= 0, got {steps!r}.")
+    if not (math.isfinite(steps) and steps == int(steps) and 0 <= steps <= MAX_STEPS):
+        raise ValueError(
+            f"steps must be a whole number of rows from 0 to {MAX_STEPS:.0e}, got {steps!r}."
+        )
+    return int(steps)
+
+
+def transition_power(transmat, steps):
+    """``transmat ** steps`` by repeated squaring, every product put back on the rows' simplex
+    (non-negative, rows summing to one) so that round-off cannot build up over the ~60
+    squarings of a long horizon."""
+
+    def stochastic(matrix):
+        np.clip(matrix, 0.0, None, out=matrix)
+        matrix /= matrix.sum(axis=1, keepdims=True)
+        return matrix
+
+    result = np.eye(transmat.shape[0])
+    base = np.array(transmat, dtype=float)
+    while steps:
+        if steps & 1:
+            result = stochastic(result @ base)
+        steps >>= 1
+        if steps:
+            base = stochastic(base @ base)
+    return result
 
 
 def marginal_estimates(ahead, model, return_std=False):

@@ -90,6 +90,13 @@ class OnlineMeans:
         self._denominator = np.empty((n_states, 1))
         self.n_learned = 0
 
+    def __setstate__(self, state):
+        """Unpickle (or deep-copy), then link the flat view of the moves again: pickling copies
+        a view into an array of its own, which the updates would then no longer reach. The
+        owner links ``bias`` to its weights again."""
+        self.__dict__.update(state)
+        self._moves_flat = self._moves.reshape(-1)
+
     def learn_target(self, alpha, inputs, target):
         """Learn a sample from its measured outputs in data units (a NaN one is skipped)."""
         scaling = self.model.standardization

@@ -53,6 +53,34 @@ def _column_label(column):
     return f"x{column}" if isinstance(column, numbers.Integral) else str(column)
 
 
+def low_pass(values, decay):
+    """One recording through the causal first-order filter ``y_t = decay y_(t-1) + (1 - decay)
+    x_t``, started at its first observed value (``y = x`` there).
+
+    A missing value (NaN) gives NaN and leaves the filter's state alone; the next observed
+    value ``x`` after ``g`` missing ones is taken in over the ``g + 1`` periods since the last
+    observed one, ``y = decay^(g+1) y_last + (1 - decay^(g+1)) x`` (the filter's exact answer to
+    ``x`` held over that time), so that a missing sample never spreads.
+    """
+    filtered = np.full(len(values), np.nan)
+    observed = np.flatnonzero(~np.isnan(values))
+    if not observed.size:
+        return filtered
+    # runs of consecutive observed rows
+    breaks = np.flatnonzero(np.diff(observed) > 1) + 1
+    last = last_row = None
+    for run in np.split(observed, breaks):
+        x = values[run[0] : run[-1] + 1]
+        if last is None:  # the recording's first observed value: y = x
+            start = decay * x[0]
+        else:  # after a gap of g missing rows, as above; the lfilter adds (1 - decay) x[0]
+            lapse = decay ** (run[0] - last_row)
+            start = lapse * last + (decay - lapse) * x[0]
+        filtered[run[0] : run[-1] + 1] = lfilter([1.0 - decay], [1.0, -decay], x, zi=[start])[0]
+        last, last_row = filtered[run[-1]], run[-1]
+    return filtered
+
+
 @fill_shared_parameters
 class SteeringFeatures(TransformerMixin, BaseEstimator):
     """Append the friction and load-compression inputs of a power-assisted steering system.
@@ -80,7 +108,10 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
     velocity_filter : float or None, default=None
         Time constant [s] of a causal first-order low-pass filter on the velocity before the
         friction input (0.02 s suits 100 Hz sensors; at 20 Hz it changes little). ``None``
-        filters nothing. Needs ``sampling_period``.
+        filters nothing. Needs ``sampling_period``. The filter starts at the first observed
+        velocity of each recording (its output equals it there); a missing velocity gives a
+        missing friction input and leaves the filter's state alone, and the next observed
+        velocity is taken in over the whole time since the last one.
     {sampling_period}
 
     Attributes
@@ -266,10 +297,7 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
         decay = math.exp(-self.sampling_period / self.velocity_filter)
         filtered = np.empty_like(ordered)
         for start, stop in zip(recordings.starts, recordings.stops, strict=True):
-            segment = ordered[start:stop]
-            filtered[start:stop] = lfilter(
-                [1.0 - decay], [1.0, -decay], segment, zi=[decay * segment[0]]
-            )[0]
+            filtered[start:stop] = low_pass(ordered[start:stop], decay)
         return rows.to_caller_order(filtered)
 
     def _check_powers(self):

@@ -176,6 +176,44 @@ def test_predict_ahead_at_zero_steps_is_predict_and_the_std_is_returned(fitted):
         fitted.predict_ahead(X, -1)
 
 
+def test_transition_power_equals_a_plain_loop_and_stays_stochastic():
+    from skhmmgmr._adaptation import transition_power
+
+    rng = np.random.default_rng(0)
+    transmat = rng.dirichlet(np.ones(4), size=4)
+    loop = np.eye(4)
+    for steps in range(40):
+        np.testing.assert_allclose(transition_power(transmat, steps), loop, rtol=0, atol=1e-14)
+        loop = loop @ transmat
+    # far past the mixing time: every row is the stationary distribution pi (pi A = pi)
+    values, vectors = np.linalg.eig(transmat.T)
+    pi = np.real(vectors[:, np.argmin(np.abs(values - 1.0))])
+    pi /= pi.sum()
+    far = transition_power(transmat, 10**9)
+    np.testing.assert_allclose(far, np.tile(pi, (4, 1)), rtol=0, atol=1e-12)
+    assert np.all(far >= 0) and np.allclose(far.sum(axis=1), 1.0, rtol=0, atol=1e-15)
+
+
+def test_a_far_horizon_forecasts_the_stationary_mixture_of_the_state_means(fitted):
+    """#35: steps=10**17 returned -1148 where every state mean lay in [-5.7, -1.5]."""
+    X, _ = _data(30, 10)
+    model = fitted.model_
+    far = fitted.predict_ahead(X, 10**9)
+    values, vectors = np.linalg.eig(model.transmat.T)
+    pi = np.real(vectors[:, np.argmin(np.abs(values - 1.0))])
+    pi /= pi.sum()
+    means = model.standardization.outputs(model.emissions.means[:, model.n_inputs :])[:, 0]
+    np.testing.assert_allclose(far, pi @ means, rtol=0, atol=1e-9)
+    assert means.min() <= far.min() and far.max() <= means.max()
+
+
+@pytest.mark.parametrize("steps", [10**17, 10**9 + 1, True, np.inf, np.nan, None, "3", -1, 2.5])
+def test_a_horizon_that_is_not_a_number_of_rows_is_named(fitted, steps):
+    X, _ = _data(10, 11)
+    with pytest.raises(ValueError, match=r"steps must be a whole number of rows.*got"):
+        fitted.predict_ahead(X, steps)
+
+
 def test_shift_target_never_crosses_a_recording():
     y = np.arange(7.0)
     got = shift_target(y, 2, groups=list("aaabbbb"))

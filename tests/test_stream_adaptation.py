@@ -188,3 +188,24 @@ def test_a_target_needs_an_adapting_stream(model):
         stream.update_batch(X, y=y)
     with pytest.raises(ValueError, match="rows"):
         model.filter_stream(relevance=4.0).update_batch(X, y=y[:5])
+
+
+@pytest.mark.parametrize("duplicate", ["pickle", "deepcopy"])
+def test_a_copied_adapting_stream_goes_on_adapting_as_the_original(model, duplicate):
+    """#35: the copy's updates must reach its own weights (its views linked again)."""
+    import copy
+
+    X, y = _data(300, 4, offset=1.5)
+    stream = model.filter_stream(relevance=8.0, forgetting=0.995)
+    stream.update_batch(X[:100], y=y[:100])
+    twin = pickle.loads(pickle.dumps(stream)) if duplicate == "pickle" else copy.deepcopy(stream)
+    expected = _stream(stream, X[100:], y[100:], return_std=True)
+    got = _stream(twin, X[100:], y[100:], return_std=True)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+    # and it did adapt: the plain stream from the same point differs
+    plain = pickle.loads(pickle.dumps(stream))
+    plain.reset_adaptation()
+    assert np.abs(_stream(plain, X[100:], return_std=True) - expected).max() > 0.05
+    np.testing.assert_allclose(
+        twin.adapted_model().emissions.means, stream.adapted_model().emissions.means, atol=1e-12
+    )

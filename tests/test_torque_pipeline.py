@@ -269,6 +269,50 @@ def test_velocity_filter_restarts_at_every_recording():
     np.testing.assert_allclose(got.to_numpy(), expected_panel.to_numpy(), rtol=1e-13)
 
 
+def _plain_filter_with_gaps(values, decay):
+    """A plain loop: NaN rows give NaN and are skipped; the next observed value is taken in
+    over the whole time since the last observed one (the first-order response to it)."""
+    out, state, since = [], None, 0
+    for value in values:
+        since += 1
+        if np.isnan(value):
+            out.append(np.nan)
+            continue
+        if state is None:
+            state = value
+        else:
+            lapse = decay**since
+            state = lapse * state + (1.0 - lapse) * value
+        since = 0
+        out.append(state)
+    return np.array(out)
+
+
+def test_a_missing_velocity_stays_one_missing_friction_input():
+    """#35: one NaN velocity used to make the friction input NaN for the rest of the
+    recording."""
+    rng = np.random.default_rng(3)
+    X = pd.DataFrame(rng.normal(size=(200, 3)), columns=COLUMNS)
+    velocity = X["steering_wheel_velocity"].to_numpy().copy()
+    velocity[[0, 1, 20, 50, 51, 52, 199]] = np.nan  # missing at the start, alone, in a run
+    X["steering_wheel_velocity"] = velocity
+    groups = np.repeat(["a", "b"], 100)
+    out = SteeringFeatures(velocity_filter=0.02, sampling_period=0.01).fit_transform(
+        X, groups=groups
+    )
+    decay = math.exp(-0.5)
+    expected = np.concatenate(
+        [_plain_filter_with_gaps(velocity[g == groups], decay) for g in ("a", "b")]
+    )
+    friction = out["steering_friction"].to_numpy()
+    np.testing.assert_array_equal(np.isnan(friction), np.isnan(velocity))
+    np.testing.assert_allclose(friction, np.tanh(expected / 0.1), rtol=1e-12)
+    # without a missing value the rule is the plain filter
+    assert np.allclose(
+        _plain_filter_with_gaps(np.arange(5.0), decay), _plain_filter(np.arange(5.0), decay)
+    )
+
+
 def test_velocity_filter_needs_the_sampling_period():
     with pytest.raises(ValueError, match="velocity_filter=0.02 needs sampling_period"):
         SteeringFeatures(velocity_filter=0.02).fit(_frame())
