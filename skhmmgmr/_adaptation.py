@@ -20,8 +20,6 @@ transition matrix, ``alpha_t A^h``, and mixes per-state outputs (see
 :meth:`AdaptMixin.predict_ahead`).
 """
 
-import math
-import numbers
 from dataclasses import replace
 
 import numpy as np
@@ -31,12 +29,19 @@ from ._em import HMMParameters, e_step
 from ._em_data import Columns, EStepData
 from ._emissions import make_emissions
 from ._fitted import FittedHMMGMR
+from ._gaussian import NotPositiveDefiniteError
 from ._gmr import filter_state_probabilities, gmr_estimates, mix_estimates
 from ._missing import observed_counts
 from ._panel import read_row_order
 from ._prediction_inputs import read_inputs
 from ._sequences import as_recordings
-from ._validation import check_finite, check_target_finite, column_names_of, validate_joint
+from ._validation import (
+    check_adaptation_params,
+    check_finite,
+    check_target_finite,
+    column_names_of,
+    validate_joint,
+)
 
 ADAPTED_PARAMETERS = frozenset("mvt")
 
@@ -51,8 +56,9 @@ def check_parameters(parameters):
     return set(parameters)
 
 
-def map_step(stats, prior, relevance, parameters):
-    """The MAP M-step of the adapted ``parameters`` with ``prior`` (HMMParameters) fixed."""
+def map_step(stats, prior, relevance, parameters, reg_covar=0.0):
+    """The MAP M-step of the adapted ``parameters`` with ``prior`` (HMMParameters) fixed;
+    ``reg_covar`` is added to the diagonal of every adapted covariance, as fit's M-step does."""
     emission, old = stats.emission, prior.emissions
     weights = emission.weights
     means = old.means
@@ -72,17 +78,29 @@ def map_step(stats, prior, relevance, parameters):
                 :, np.newaxis, np.newaxis
             ]
         covariances = 0.5 * (covariances + np.swapaxes(covariances, -1, -2))
+        diagonal = np.einsum("...ii->...i", covariances)  # a writeable view
+        diagonal += reg_covar
     startprob, transmat = prior.startprob, prior.transmat
     if "t" in parameters:
         starts = stats.start_counts + relevance * prior.startprob
         startprob = starts / starts.sum()
         counts = stats.transition_counts + relevance * prior.transmat
         transmat = counts / counts.sum(axis=1, keepdims=True)
-    emissions = make_emissions(old.covariance_type, means, covariances)
+    try:
+        emissions = make_emissions(old.covariance_type, means, covariances)
+    except NotPositiveDefiniteError as exc:
+        raise ValueError(
+            f"adapt: {exc.args[0].split(';')[0]} after adaptation with relevance={relevance:g}: "
+            "the state's rows are too few or too alike for its covariance and the prior's "
+            "weight vanishes beside them in floating point; raise relevance or the estimator's "
+            "reg_covar, or adapt the means only (parameters='m')."
+        ) from None
     return HMMParameters(np.asarray(startprob), np.asarray(transmat), emissions)
 
 
-def adapt_parameters(columns, recordings, prior, *, relevance, parameters, n_iter, tol):
+def adapt_parameters(
+    columns, recordings, prior, *, relevance, parameters, n_iter, tol, reg_covar=0.0
+):
     """MAP EM from ``prior`` on standardised ``columns`` (:class:`Columns`).
 
     Returns ``(parameters, history, n_done, converged)``; ``history`` holds the log-likelihood
@@ -99,7 +117,7 @@ def adapt_parameters(columns, recordings, prior, *, relevance, parameters, n_ite
         history.append(stats.log_likelihood)
         if converged:
             break
-        params = map_step(stats, prior, relevance, parameters)
+        params = map_step(stats, prior, relevance, parameters, reg_covar)
     else:
         history.append(e_step(engine, params).log_likelihood)
     return params, history, n_done, converged
@@ -138,7 +156,9 @@ class AdaptMixin:
             its fitted parameters to those of the new data. Small values approach plain
             (maximum likelihood) EM; ``r > 0`` keeps every adapted covariance positive
             definite (``r S0`` is added to the scatter), even for a state the new
-            recordings never visit.
+            recordings never visit; the estimator's ``reg_covar`` is added to its diagonal
+            as in :meth:`fit`, so that this holds in floating point too when ``r`` is so
+            small that ``r S0`` vanishes beside the scatter.
         parameters : str, default="m"
             Which parameters adapt: any of "m" (means), "v" (covariances) and "t" (start and
             transition probabilities), as hmmlearn's ``params``.
@@ -168,11 +188,15 @@ class AdaptMixin:
         """
         check_is_fitted(self)
         adapted = check_parameters(parameters)
-        if not (np.isscalar(relevance) and np.isfinite(relevance) and relevance > 0):
-            raise ValueError(f"relevance must be a finite number > 0, got {relevance!r}")
-        if int(n_iter) != n_iter or n_iter < 1:
-            raise ValueError(f"n_iter must be a positive integer, got {n_iter!r}")
-        if len(X) == 0:  # nothing to adapt to: the model and its fit attributes stay
+        check_adaptation_params("adapt", relevance=relevance, n_iter=n_iter)
+        if _n_rows(X) == 0:  # nothing to adapt to: the model and its fit attributes stay
+            lengths = {"y": _n_rows(y), "groups": _n_rows(groups), "time": _n_rows(time)}
+            extra = {name: n for name, n in lengths.items() if n}
+            if extra:
+                raise ValueError(
+                    f"X has no rows but {', '.join(f'{k} has {n}' for k, n in extra.items())}: "
+                    "they must describe the same rows."
+                )
             return self
         rows = read_row_order(X, groups, time)
         X, y, groups = rows.to_filter_order(X), rows.to_filter_order(y), rows.groups
@@ -203,6 +227,7 @@ class AdaptMixin:
             parameters=adapted,
             n_iter=int(n_iter),
             tol=self.tol,
+            reg_covar=self.reg_covar,
         )
         self.model_ = FittedHMMGMR.from_standardized(
             params.startprob,
@@ -276,7 +301,8 @@ class AdaptMixin:
             raise ValueError(
                 f"state_output must be 'marginal' or 'conditional', got {state_output!r}"
             )
-        steps = check_steps(steps)
+        check_adaptation_params("predict_ahead", steps=steps)
+        steps = int(steps)
         # The rows in filter order, read once (with their missing values) for both steps.
         standardized, recordings, rows, missing = read_inputs(self, X, groups, time)
         model = self.model_
@@ -294,20 +320,9 @@ class AdaptMixin:
         return estimate, rows.to_caller_order(std[:, 0] if model.scalar_output else std)
 
 
-# Forecast horizons in rows: a billion rows is 116 days at 100 Hz, far past the time the state
-# probabilities take to reach the chain's stationary distribution.
-MAX_STEPS = 10**9
-
-
-def check_steps(steps):
-    """``steps`` as an int, refusing what is not a whole number of rows in [0, MAX_STEPS]."""
-    if isinstance(steps, (bool, np.bool_)) or not isinstance(steps, numbers.Real):
-        raise ValueError(f"steps must be a whole number of rows >= 0, got {steps!r}.")
-    if not (math.isfinite(steps) and steps == int(steps) and 0 <= steps <= MAX_STEPS):
-        raise ValueError(
-            f"steps must be a whole number of rows from 0 to {MAX_STEPS:.0e}, got {steps!r}."
-        )
-    return int(steps)
+def _n_rows(values):
+    """Number of rows of an array-like, 0 for None."""
+    return 0 if values is None else len(values)
 
 
 def transition_power(transmat, steps):

@@ -18,7 +18,9 @@ from sklearn.base import (
 )
 from sklearn.utils._param_validation import (
     HasMethods,  # constraint: an object having the given methods; since 1.2
+    InvalidParameterError,  # what the constraints raise (a ValueError and a TypeError); 1.2
     StrOptions,  # constraint: one of a set of strings; since 1.2
+    validate_parameter_constraints,  # check a dict of parameters against constraints; 1.2
 )
 from sklearn.utils._param_validation import (
     Interval as _SklearnInterval,  # constraint: a number in a range (bools too); since 1.2
@@ -47,8 +49,10 @@ class Interval(_SklearnInterval):
 __all__ = [
     "HasMethods",
     "Interval",
+    "InvalidParameterError",
     "StrOptions",
     "_MetadataRequester",
     "_fit_context",
     "_routing_enabled",
+    "validate_parameter_constraints",
 ]

@@ -4,6 +4,7 @@ streaming, the portable JSON format and hmmlearn."""
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
+from ._compat import InvalidParameterError, validate_parameter_constraints
 from .portable import FIT_INFO_KEYS, export_json, load_json, read_model, to_dict
 
 _HISTORIES = ("log_likelihood_history", "penalized_log_likelihood_history")
@@ -40,6 +41,10 @@ class ModelIOMixin:
         """
         params = {**params, "n_states": model.n_states, "covariance_type": model.covariance_type}
         estimator = cls(**params)
+        # as fit would: a model restored with a parameter fit refuses must be refused too
+        validate_parameter_constraints(
+            cls._parameter_constraints, estimator.get_params(deep=False), caller_name=cls.__name__
+        )
         estimator.model_ = model
         estimator.n_features_in_ = model.n_inputs
         if model.feature_names is not None:
@@ -51,6 +56,8 @@ class ModelIOMixin:
     def _from_portable(cls, portable):
         try:
             estimator = cls.from_fitted_model(portable.model, **portable.estimator_params)
+        except InvalidParameterError as exc:
+            raise ValueError(f"'estimator_params' holds a value fit refuses: {exc}") from exc
         except TypeError as exc:
             raise ValueError(f"'estimator_params' holds an unknown parameter: {exc}") from exc
         for key, value in portable.fit_info.items():

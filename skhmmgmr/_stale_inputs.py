@@ -32,6 +32,11 @@ MISSING_VALUES = ("error", "marginalize", "carry_forward")
 LAGS = np.array([1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 48, 64, 80, 96, 128])
 # Pairs of values per lag from which a variogram is learned (an evenly spaced sample).
 MAX_PAIRS = 200_000
+# The smallest variance of a carried value (standardised units): a constant column's variogram
+# is floored at it, and a model file may not go below it (1 / 1e-320 overflows the update).
+MIN_VARIANCE = 1e-12
+# The longest tabulated gap a model file may hold, in samples (about 6 days at 100 Hz).
+MAX_LAG = 2**26
 
 
 def last_observed(values, starts, stops):
@@ -72,14 +77,25 @@ class StaleInputNoise:
 
     def frozen(self, n_inputs):
         """A read-only copy, checked to cover ``n_inputs`` columns."""
-        lags = np.array(self.lags, dtype=np.int64)
-        variances = np.array(self.variances, dtype=float)
-        if lags.ndim != 1 or np.any(lags < 1) or np.any(np.diff(lags) <= 0):
-            raise ValueError("stale_noise.lags must be increasing positive integers")
-        if variances.shape != (n_inputs, lags.size) or not np.all(variances > 0):
+        lags = np.asarray(self.lags)
+        if (
+            lags.ndim != 1
+            or lags.dtype.kind not in "iu"
+            or np.any(lags < 1)
+            or np.any(lags > MAX_LAG)
+            or np.any(np.diff(lags) <= 0)
+        ):
             raise ValueError(
-                f"stale_noise.variances must be positive (inf where unknown), of shape "
-                f"({n_inputs}, {lags.size}); got shape {variances.shape}"
+                f"stale_noise.lags must be increasing whole numbers of samples from 1 to "
+                f"{MAX_LAG}, got {self.lags!r}"
+            )
+        lags = lags.astype(np.int64)
+        variances = np.array(self.variances, dtype=float)
+        if variances.shape != (n_inputs, lags.size) or not np.all(variances >= MIN_VARIANCE):
+            raise ValueError(
+                f"stale_noise.variances must be at least {MIN_VARIANCE:g} (standardised units; "
+                f"inf where unknown), of shape ({n_inputs}, {lags.size}); got shape "
+                f"{variances.shape}, smallest {np.min(variances, initial=np.inf):g}"
             )
         lags.flags.writeable = variances.flags.writeable = False
         return type(self)(lags, variances)
@@ -104,7 +120,7 @@ class StaleInputNoise:
             sums = np.nansum(np.square(differences), axis=0)
             seen = counts > 0
             # A variance of zero (a constant column) would trust the carried value exactly.
-            variances[seen, i] = np.maximum(sums[seen] / counts[seen], 1e-12)
+            variances[seen, i] = np.maximum(sums[seen] / counts[seen], MIN_VARIANCE)
         return cls(lags.astype(np.int64), variances)
 
     def precisions(self, gaps):

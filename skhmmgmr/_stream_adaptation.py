@@ -30,16 +30,15 @@ import numpy as np
 from ._emissions import make_emissions
 from ._fitted import FittedHMMGMR
 from ._gmr import condition_on_inputs
+from ._validation import check_adaptation_params
 
 
 def check_adaptation(relevance, forgetting):
     """Validated ``(relevance, forgetting)``; ``relevance=None`` disables adaptation."""
-    if relevance is not None and not (
-        np.isscalar(relevance) and np.isfinite(relevance) and relevance > 0
-    ):
-        raise ValueError(f"relevance must be None or a finite number > 0, got {relevance!r}")
-    if not (np.isscalar(forgetting) and 0.0 < forgetting <= 1.0):
-        raise ValueError(f"forgetting must be in (0, 1], got {forgetting!r}")
+    if relevance is None:
+        check_adaptation_params("FilterStream", forgetting=forgetting)
+    else:
+        check_adaptation_params("FilterStream", relevance=relevance, forgetting=forgetting)
     return relevance, float(forgetting)
 
 

@@ -8,7 +8,29 @@ import numpy as np
 from scipy import sparse
 from sklearn.utils.validation import check_array, check_consistent_length, validate_data
 
+from ._compat import Interval, validate_parameter_constraints
 from ._sequences import as_recordings
+
+# Parameters of the methods that adapt a fitted model or forecast with it (not estimator
+# parameters, so that they are checked where they are passed): one set of constraints, so that
+# a stream, adapt and predict_ahead refuse the same values with the same message.
+ADAPTATION_CONSTRAINTS = {
+    "relevance": [Interval(numbers.Real, 0, None, closed="neither")],
+    "forgetting": [Interval(numbers.Real, 0, 1, closed="right")],
+    "n_iter": [Interval(numbers.Integral, 1, None, closed="left")],
+    # a billion rows is 116 days at 100 Hz, far past the time the state probabilities take
+    # to reach the chain's stationary distribution
+    "steps": [Interval(numbers.Integral, 0, 10**9, closed="both")],
+}
+
+
+def check_adaptation_params(caller, **params):
+    """Check ``params`` (names of :data:`ADAPTATION_CONSTRAINTS`) as scikit-learn checks an
+    estimator's parameters; the error (a ValueError) names the parameter, ``caller`` and the
+    value given."""
+    validate_parameter_constraints(
+        {name: ADAPTATION_CONSTRAINTS[name] for name in params}, params, caller_name=caller
+    )
 
 
 def check_dense(values, *, name, by):
@@ -59,7 +81,7 @@ def check_finite(values, *, name, column_names, recordings, allow_nan=False):
     n_bad = int((~finite).sum())
     raise ValueError(
         f"Input {name} contains {kind} in column {column_names[column]!r} of recording "
-        f"{recording!r} (row {row - start} of the recording, row {row} overall; {n_bad} "
+        f"{_shown(recording)} (row {row - start} of the recording, row {row} overall; {n_bad} "
         + (
             "infinite value(s) in all). An infinity is not a missing value: replace it by NaN "
             "or drop it."
@@ -68,6 +90,11 @@ def check_finite(values, *, name, column_names, recordings, allow_nan=False):
             "a NaN or infinity cannot be filtered."
         )
     )
+
+
+def _shown(recording):
+    """A recording id as the user wrote it: NumPy scalars as plain Python values."""
+    return repr(recording.item() if isinstance(recording, np.generic) else recording)
 
 
 def check_target_finite(y, groups, allow_nan=False):

@@ -427,6 +427,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         -------
         score : float
         """
+        check_target_finite(y, None)  # names y's column and row, not "Input contains NaN"
         return r2_score(y, self.predict(X, groups=groups), sample_weight=sample_weight)
 
     def log_likelihood(self, X, y, groups=None):

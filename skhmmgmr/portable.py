@@ -64,7 +64,7 @@ import numpy as np
 from ._emissions import make_emissions
 from ._fitted import FittedHMMGMR, Standardization
 from ._gaussian import NotPositiveDefiniteError
-from ._stale_inputs import StaleInputNoise
+from ._stale_inputs import MAX_LAG, StaleInputNoise
 from ._version import __version__
 
 FORMAT_NAME = "skhmmgmr-hmm-gmr"
@@ -180,12 +180,19 @@ def load_json(path):
     def reject(token):
         raise ValueError(f"{path}: the number {token} is not valid JSON (non-finite value)")
 
-    with open(path, encoding="utf-8") as file:
-        text = file.read()
+    try:
+        with open(path, encoding="utf-8") as file:
+            text = file.read()
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path} is not a JSON text file (UTF-8): {exc}") from None
     try:
         return json.loads(text, parse_constant=reject)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path} is not a valid JSON file: {exc}") from exc
+    except RecursionError:
+        raise ValueError(f"{path}: the JSON is nested too deeply for a model file") from None
+    except ValueError as exc:  # such as an integer of thousands of digits
+        raise ValueError(f"{path} is not a valid model file: {exc}") from None
 
 
 # Fit information the JSON format keeps, as the estimator's attributes (name + "_").
@@ -256,7 +263,7 @@ def read_model(data):
             standardization,
             scalar_output=target_ndim == 1,
             feature_names=feature_names if named else None,
-            stale_noise=_stale_noise(data.get("stale_inputs")),
+            stale_noise=_stale_noise(data.get("stale_inputs"), dims["F"]),
         )
     except (NotPositiveDefiniteError, np.linalg.LinAlgError) as exc:
         raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
@@ -270,20 +277,41 @@ def read_model(data):
     if not isinstance(fit_info, dict):
         raise ValueError("'fit_info' must be a JSON object")
     fit_info = {key: fit_info[key] for key in FIT_INFO_KEYS if fit_info.get(key) is not None}
+    for key in ("log_likelihood_history", "penalized_log_likelihood_history"):
+        if key in fit_info:
+            history = fit_info[key]
+            if not isinstance(history, list) or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in history
+            ):
+                raise ValueError(f"'fit_info.{key}' must be a list of numbers")
     return PortableModel(model, params, fit_info)
 
 
-def _stale_noise(block):
+def _stale_noise(block, n_inputs):
     if block is None:
         return None
+    problem = (
+        "'stale_inputs' must be an object holding 'lags' (a list of whole numbers) and "
+        "'variances' (a list of lists of numbers or null, one list per input)"
+    )
+    if not isinstance(block, dict) or not isinstance(block.get("lags"), list):
+        raise ValueError(problem)
+    lags = block["lags"]
+    if not all(isinstance(lag, int) and not isinstance(lag, bool) for lag in lags):
+        raise ValueError(f"'stale_inputs.lags' must hold whole numbers, got {lags!r:.200}")
+    if not all(1 <= lag <= MAX_LAG for lag in lags):
+        raise ValueError(f"'stale_inputs.lags' must lie in [1, {MAX_LAG}], got {lags!r:.200}")
     try:
-        lags = np.asarray(block["lags"], dtype=np.int64)
         variances = np.array(block["variances"], dtype=float)  # null -> NaN
     except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(
-            "'stale_inputs' must hold 'lags' (integers) and 'variances' (numbers or null)"
-        ) from exc
-    return StaleInputNoise(lags, np.where(np.isnan(variances), np.inf, variances))
+        raise ValueError(f"{problem} ({exc})") from None
+    noise = StaleInputNoise(
+        np.array(lags, dtype=np.int64), np.where(np.isnan(variances), np.inf, variances)
+    )
+    try:
+        return noise.frozen(n_inputs)
+    except ValueError as exc:
+        raise ValueError(f"'stale_inputs' is not usable: {exc}") from None
 
 
 def _joint_emissions(block, joint):
@@ -359,6 +387,9 @@ def _names(data, key, length):
         raise ValueError(f"{key!r} must be a list of {length} names")
     if not all(isinstance(name, str) for name in names):
         raise ValueError(f"{key!r} must hold strings only")
+    repeated = sorted({name for name in names if names.count(name) > 1})
+    if repeated:
+        raise ValueError(f"{key!r} names {repeated} more than once")
     return names
 
 

@@ -19,6 +19,7 @@ conditioned on its observed inputs (:func:`~skhmmgmr._missing.gmr_given_observed
 """
 
 import math
+import numbers
 
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
@@ -317,7 +318,7 @@ class FilterStream:
         else:
             row = as_row(features, getattr(self, "feature_names_in_", None), self.n_features_in_)
         if target is not None:
-            self._check_learns()
+            target = self._read_target(target)  # checked before the sample is consumed
         np.subtract(row, self._input_center, out=self._z_inputs)
         np.divide(self._z_inputs, self._input_scale, out=self._z_inputs)
         estimate = self._step()
@@ -383,6 +384,50 @@ class FilterStream:
     def _check_learns(self):
         if self._online is None:
             raise ValueError("a target is learned only by a stream with relevance set")
+
+    def _read_target(self, target):
+        """The measured outputs of one sample as a float (one output) or an array of shape
+        (n_outputs,); ValueError naming ``target`` for anything else."""
+        self._check_learns()
+        if (
+            self._scalar_output
+            and isinstance(target, numbers.Real)
+            and not isinstance(target, (bool, np.bool_))
+        ):
+            return float(target)
+        try:
+            values = np.asarray(target, dtype=float)
+        except (TypeError, ValueError):
+            values = None
+        if (
+            values is None
+            or values.ndim > 1
+            or values.size != self._n_outputs
+            or (isinstance(target, (bool, np.bool_)))
+        ):
+            raise ValueError(
+                f"target must be the {self._n_outputs} measured output(s) of the sample "
+                f"(NaN if unknown), got {target!r:.100}"
+            )
+        return float(values[0]) if self._scalar_output else values.reshape(self._n_outputs)
+
+    def _read_targets(self, y, n_samples):
+        """The measured outputs of a batch, shape (n_samples,) or (n_samples, n_outputs);
+        ValueError naming ``y`` for anything else."""
+        self._check_learns()
+        try:
+            values = np.asarray(y, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"y must hold numbers (NaN if unknown): {exc}") from None
+        expected = (n_samples,) if self._scalar_output else (n_samples, self._n_outputs)
+        if self._scalar_output and values.shape == (n_samples, 1):
+            values = values[:, 0]
+        if values.shape != expected:
+            raise ValueError(
+                f"y has shape {values.shape}; the batch of {n_samples} rows of a model with "
+                f"{self._n_outputs} output(s) needs shape {expected}"
+            )
+        return values
 
     def _learn(self, target):
         """Learn the measured outputs of the last sample (see the Notes)."""
@@ -461,10 +506,7 @@ class FilterStream:
         names = getattr(self, "feature_names_in_", None)
         X = as_batch(rows.to_filter_order(X), names, self.n_features_in_)
         if y is not None:
-            self._check_learns()
-            y = np.asarray(rows.to_filter_order(y), dtype=float)
-            if y.shape[0] != X.shape[0]:
-                raise ValueError(f"y has {y.shape[0]} rows, X {X.shape[0]}")
+            y = self._read_targets(rows.to_filter_order(y), X.shape[0])
         restarts = self._recording_starts(rows.groups, X.shape[0])
         shape = (X.shape[0],) if self._scalar_output else (X.shape[0], self._n_outputs)
         estimates = np.empty(shape)

@@ -210,7 +210,7 @@ def test_a_far_horizon_forecasts_the_stationary_mixture_of_the_state_means(fitte
 @pytest.mark.parametrize("steps", [10**17, 10**9 + 1, True, np.inf, np.nan, None, "3", -1, 2.5])
 def test_a_horizon_that_is_not_a_number_of_rows_is_named(fitted, steps):
     X, _ = _data(10, 11)
-    with pytest.raises(ValueError, match=r"steps must be a whole number of rows.*got"):
+    with pytest.raises(ValueError, match=r"The .steps. parameter of predict_ahead must be an int"):
         fitted.predict_ahead(X, steps)
 
 
@@ -234,3 +234,59 @@ def test_shift_target_reads_a_panel_index_in_any_row_order():
     got = shift_target(y, 1)
     assert got.index.equals(index) and got.name == "torque"
     np.testing.assert_array_equal(got.to_numpy(), [11.0, 1.0, 12.0, 2.0, np.nan, np.nan])
+
+
+# --- #35: what adapt refuses, and what it now does with a tiny relevance ---------------------
+
+
+def test_adapt_refuses_rows_of_y_or_groups_without_rows_of_x(fitted):
+    X, y = _data(400, 12)
+    groups = np.repeat(["a", "b"], 200)
+    with pytest.raises(ValueError, match="X has no rows but y has 400, groups has 400"):
+        _copy(fitted).adapt(X[:0], y, groups=groups)
+    with pytest.raises(ValueError, match="X has no rows but y has 400"):
+        _copy(fitted).adapt(X[:0], y)
+
+
+@pytest.mark.parametrize(
+    "options, parameter",
+    [
+        ({"relevance": "16"}, "relevance"),
+        ({"relevance": True}, "relevance"),
+        ({"relevance": 0.0}, "relevance"),
+        ({"relevance": np.inf}, "relevance"),
+        ({"relevance": np.nan}, "relevance"),
+        ({"n_iter": None}, "n_iter"),
+        ({"n_iter": np.inf}, "n_iter"),
+        ({"n_iter": 2.5}, "n_iter"),
+        ({"n_iter": True}, "n_iter"),
+    ],
+)
+def test_adapt_names_a_parameter_out_of_its_range(fitted, options, parameter):
+    X, y = _data(50, 13)
+    with pytest.raises(ValueError, match=rf"The '{parameter}' parameter of adapt must be"):
+        _copy(fitted).adapt(X, y, **options)
+
+
+def test_a_tiny_relevance_adapts_covariances_as_fit_regularises_them(fitted):
+    """#35: relevance=1e-300 with covariances raised "increase reg_covar", a parameter adapt
+    does not have; adapt now adds the estimator's reg_covar in its M-step, as fit does."""
+    X, y = _data(10, 14)
+    model = _copy(fitted).adapt(X, y, relevance=1e-300, parameters="mvt", n_iter=2)
+    eigenvalues = np.linalg.eigvalsh(model.model_.emissions.full_covariances)
+    assert np.all(eigenvalues >= 0.99 * fitted.reg_covar)
+    assert np.isfinite(model.predict(X)).all()
+    # without any regularisation the failure names adapt's own remedies
+    bare = _copy(fitted).set_params(reg_covar=0.0)
+    with pytest.raises(ValueError, match=r"adapt: .*relevance=1e-300.*raise relevance"):
+        bare.adapt(X, y, relevance=1e-300, parameters="mvt", n_iter=2)
+
+
+def test_score_names_a_missing_target():
+    """#35: a NaN target said only "Input contains NaN.", although X may hold NaN."""
+    X, y = _data(200, 15)
+    model = HMMGMRRegressor(n_states=2, random_state=0, missing_values="marginalize").fit(X, y)
+    y = pd.Series(y, name="torque")
+    y.iloc[17] = np.nan
+    with pytest.raises(ValueError, match=r"Input y contains NaN in column 'torque'.*row 17"):
+        model.score(X, y)

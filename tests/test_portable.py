@@ -3,6 +3,7 @@
 import copy
 import importlib.util
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -175,6 +176,16 @@ def test_missing_key_is_named(model, key):
         ("feature_names", ["a", "b"], "'feature_names' must be a list of 3"),
         ("target_ndim", 3, "'target_ndim' is 3"),
         ("estimator_params", {"n_stats": 2}, "'estimator_params' holds an unknown"),
+        # #35: values fit refuses were loaded (and NaN inputs marginalised)
+        (
+            "estimator_params",
+            {"missing_values": "bogus"},
+            "'estimator_params' holds a value fit refuses: The 'missing_values' parameter",
+        ),
+        ("estimator_params", {"missing_values": ["a"]}, "'missing_values' parameter"),
+        ("estimator_params", {"reg_covar": -1.0}, "'reg_covar' parameter"),
+        ("feature_names", ["a", "b", "a"], r"'feature_names' names \['a'\] more than once"),
+        ("fit_info", {"log_likelihood_history": [1.0, [2.0, 3.0]]}, "'fit_info.log_likel"),
     ],
 )
 def test_malformed_content_is_named(model, key, value, message):
@@ -203,6 +214,55 @@ def test_bad_files(tmp_path, text, message):
     path.write_text(text)
     with pytest.raises(ValueError, match=message):
         HMMGMRRegressor.from_json(path)
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
+        ('{"n_states": ' + "9" * 5000 + "}", "is not a valid model file"),
+        ("\ufeff{}".encode("utf-16"), r"is not a JSON text file \(UTF-8\)"),
+        (bytes(range(256)), r"is not a JSON text file \(UTF-8\)"),
+    ],
+)
+def test_files_python_cannot_read_name_the_file(tmp_path, content, message):
+    """#35: RecursionError, ValueError, UnicodeDecodeError named neither file nor key."""
+    path = tmp_path / "odd.json"
+    if isinstance(content, str):
+        path.write_text(content)
+    else:
+        path.write_bytes(content)
+    with pytest.raises(ValueError, match=re.escape(str(path)) + ".*" + message):
+        HMMGMRRegressor.from_json(path)
+
+
+@pytest.fixture(scope="module")
+def carrying(data):
+    X, y, groups = data
+    X = X.copy()
+    X.iloc[::7, 0] = np.nan
+    params = {"n_states": 2, "random_state": 0, "missing_values": "carry_forward"}
+    return HMMGMRRegressor(**params).fit(X, y, groups=groups)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda s: s["lags"].__setitem__(3, 8.9), r"'stale_inputs.lags' must hold whole numbers"),
+        (lambda s: s["lags"].__setitem__(3, True), r"'stale_inputs.lags' must hold whole"),
+        (lambda s: s["lags"].__setitem__(3, 10**30), r"'stale_inputs.lags' must lie in \[1, "),
+        (lambda s: s["variances"][0].__setitem__(0, 1e-320), "must be at least 1e-12"),
+        (lambda s: s["variances"][0].__setitem__(0, -1.0), "must be at least 1e-12"),
+        (lambda s: s["variances"].__setitem__(0, [1.0]), "'stale_inputs' must be an object"),
+        (lambda s: s.pop("lags"), "'stale_inputs' must be an object holding 'lags'"),
+    ],
+)
+def test_stale_inputs_of_a_model_file_are_checked(carrying, change, message):
+    """#35: a lag of 8.9 loaded as 8; variances of 1e-320 passed and gave NaN estimates."""
+    data = carrying.to_dict()
+    change(data["stale_inputs"])
+    with pytest.raises(ValueError, match=message):
+        HMMGMRRegressor.from_dict(data)
 
 
 def test_restored_model_streams(data, exported):

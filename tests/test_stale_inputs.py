@@ -293,7 +293,7 @@ def test_portable_model_keeps_the_variograms(carry_model):
     data["stale_inputs"]["variances"][0][0] = None  # unknown: marginalised
     assert np.isinf(HMMGMRRegressor.from_dict(data).model_.stale_noise.variances[0, 0])
     data["stale_inputs"]["variances"][0][0] = -1.0
-    with pytest.raises(ValueError, match="stale_noise.variances must be positive"):
+    with pytest.raises(ValueError, match="stale_noise.variances must be at least"):
         HMMGMRRegressor.from_dict(data)
 
 

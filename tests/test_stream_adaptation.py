@@ -209,3 +209,38 @@ def test_a_copied_adapting_stream_goes_on_adapting_as_the_original(model, duplic
     np.testing.assert_allclose(
         twin.adapted_model().emissions.means, stream.adapted_model().emissions.means, atol=1e-12
     )
+
+
+@pytest.mark.parametrize(
+    "options, parameter",
+    [
+        ({"relevance": "16"}, "relevance"),
+        ({"relevance": True}, "relevance"),
+        ({"relevance": -1.0}, "relevance"),
+        ({"relevance": 8.0, "forgetting": "0.9"}, "forgetting"),
+        ({"relevance": 8.0, "forgetting": True}, "forgetting"),
+        ({"relevance": 8.0, "forgetting": 0.0}, "forgetting"),
+        ({"relevance": 8.0, "forgetting": 1.5}, "forgetting"),
+    ],
+)
+def test_stream_parameters_are_checked_as_estimator_parameters(model, options, parameter):
+    with pytest.raises(ValueError, match=rf"The '{parameter}' parameter of FilterStream must"):
+        model.filter_stream(**options)
+
+
+@pytest.mark.parametrize("target", ["abc", [1.0, 2.0], np.ones((1, 2)), True, None])
+def test_a_bad_target_is_refused_before_the_sample_is_consumed(model, target):
+    """#35: the row was filtered (n_samples_, state_proba_ changed) before the conversion
+    error."""
+    X, y = _data(20, 5)
+    stream = model.filter_stream(relevance=8.0)
+    stream.update_batch(X[:10], y=y[:10])
+    before = (stream.n_samples_, stream.state_proba_.copy())
+    if target is None:  # a 2-D y for a one-output model
+        with pytest.raises(ValueError, match=r"y has shape \(10, 2\)"):
+            stream.update_batch(X[10:], y=np.column_stack([y[10:], y[10:]]))
+    else:
+        with pytest.raises(ValueError, match="target must be the 1 measured output"):
+            stream.update(X[10], target=target)
+    assert stream.n_samples_ == before[0]
+    np.testing.assert_array_equal(stream.state_proba_, before[1])
