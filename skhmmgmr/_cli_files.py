@@ -46,6 +46,28 @@ def check_columns(frame, columns, path):
         raise CommandError(f"{path}: missing column(s) {missing}; available: {list(frame.columns)}")
 
 
+# The --time value of fit and predict that takes the rows in file order (no time column).
+NO_TIME = "none"
+
+
+def check_time_column(frame, time, path, *, file_order):
+    """One rule for every command: the time column ``time`` must be in the file, unless
+    ``file_order`` commands are told ``--time none``; the error names both fixes."""
+    if time == NO_TIME:
+        if file_order:
+            return
+        raise CommandError(
+            f"{path}: this command needs a time column (the smoothness of the estimate is a "
+            "time derivative); name it with --time"
+        )
+    if time not in frame.columns:
+        alternative = f", or pass --time {NO_TIME} to take the rows in file order" * file_order
+        raise CommandError(
+            f"{path}: missing the time column {time!r}; name yours with --time{alternative}. "
+            f"Columns: {list(frame.columns)}"
+        )
+
+
 def in_time_order(frame, path, *, recording, time):
     """The rows of ``frame`` gathered by recording and sorted by ``time`` (None: file order).
 

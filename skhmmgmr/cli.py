@@ -15,10 +15,12 @@ import pandas as pd
 
 from ._cli_cluster import add_scheduler_option, scheduler_context
 from ._cli_files import (
+    NO_TIME,
     CommandError,
     assign_splits,
     check_columns,
     check_output,
+    check_time_column,
     in_time_order,
     load_model,
     read_data,
@@ -54,7 +56,7 @@ def _log(args, message):
 def _feature_columns(frame, args):
     if args.features:
         return list(args.features)
-    excluded = {args.target, args.recording, args.time, *META_COLUMNS}
+    excluded = {args.target, args.recording, args.time, TIME, *META_COLUMNS}
     return [
         c for c in frame.columns if c not in excluded and pd.api.types.is_numeric_dtype(frame[c])
     ]
@@ -228,7 +230,8 @@ def command_select(args):
     source = path
     if path.is_file():
         source = read_data(path, args.recording, args.split)
-        check_columns(source, [args.recording, args.target, args.time], path)
+        check_columns(source, [args.recording, args.target], path)
+        check_time_column(source, args.time, path, file_order=False)
         if args.split in source.columns and args.split != SPLIT:
             source = source.drop(columns=SPLIT, errors="ignore").rename(columns={args.split: SPLIT})
         if args.features:
@@ -290,14 +293,15 @@ def command_report(args):
 
 
 def _ordered_data(args):
-    """The data of ``fit``/``predict``, rows gathered by recording and sorted by time."""
+    """The data of ``fit``/``predict``, rows gathered by recording and sorted by time (in file
+    order with ``--time none``)."""
     frame = read_data(args.data, args.recording)
-    if args.time is None and TIME in frame.columns:
-        args.time = TIME
-    check_columns(frame, [args.recording, *[args.time] * (args.time is not None)], args.data)
-    if args.time is None:
-        _log(args, f"{args.data} has no '{TIME}' column: rows are taken in file order")
-    return in_time_order(frame, args.data, recording=args.recording, time=args.time)
+    check_columns(frame, [args.recording], args.data)
+    check_time_column(frame, args.time, args.data, file_order=True)
+    time = None if args.time == NO_TIME else args.time
+    if time is None:
+        _log(args, f"--time {NO_TIME}: the rows of {args.data} are taken in file order")
+    return in_time_order(frame, args.data, recording=args.recording, time=time)
 
 
 def command_fit(args):
@@ -314,7 +318,11 @@ def command_fit(args):
     except ValueError as exc:
         raise CommandError(f"{args.data}: {exc}") from exc
     write_output(args.output, model.export_json)
-    _log(args, f"Fitted K={args.n_states} on {len(features)} features; wrote {args.output}")
+    _log(
+        args,
+        f"Fitted K={args.n_states} on {len(features)} input(s): {', '.join(features)}; "
+        f"wrote {args.output}",
+    )
     return 0
 
 
@@ -328,17 +336,26 @@ def command_predict(args):
     frame = _ordered_data(args)
     features = list(model.feature_names_in_)
     check_columns(frame, features, args.data)
+    names = [f"{args.prefix}{n}" for n in ("estimate", "estimate_std")]
+    names += [f"{args.prefix}state_{k}" for k in range(model.n_states)]
+    taken = [name for name in names if name in frame.columns]
+    if taken:
+        raise CommandError(
+            f"{args.data} already has the column(s) {taken}, which predict writes: rename "
+            "them, or pass --prefix to write the predictions under other names"
+        )
     groups = frame[args.recording].to_numpy()
     try:
         estimate, std = model.predict(frame[features], groups=groups, return_std=True)
         proba = model.predict_state_proba(frame[features], groups=groups)
     except ValueError as exc:
         raise CommandError(f"{args.data}: {exc}") from exc
-    result = frame.copy()
-    result["estimate"] = estimate
-    result["estimate_std"] = std
-    for k in range(proba.shape[1]):
-        result[f"state_{k}"] = proba[:, k]
+    written = {
+        f"{args.prefix}estimate": estimate,
+        f"{args.prefix}estimate_std": std,
+        **{f"{args.prefix}state_{k}": proba[:, k] for k in range(proba.shape[1])},
+    }
+    result = pd.concat([frame, pd.DataFrame(written, index=frame.index)], axis=1)
     if output.suffix in (".parquet", ".pq"):
         write_output(output, result.to_parquet)
     else:
@@ -347,13 +364,13 @@ def command_predict(args):
     return 0
 
 
-def _add_data_options(parser, time=TIME):
+def _add_data_options(parser, *, file_order=False):
     parser.add_argument("--target", default=TARGET, help="target column")
     parser.add_argument("--recording", default=RECORDING, help="recording-id column")
-    text = "time column: rows are sorted by it within each recording"
-    if time is None:
-        text += f" (default: '{TIME}' if the file has one, else rows in file order)"
-    parser.add_argument("--time", default=time, help=text)
+    text = "time column [s]: rows are sorted by it within each recording; never an input"
+    if file_order:
+        text += f" ('{NO_TIME}': no time column, the rows are taken in file order)"
+    parser.add_argument("--time", default=TIME, help=text)
 
 
 def _add_output_options(parser, default, text):
@@ -458,7 +475,7 @@ def build_parser():
 
     fit = sub.add_parser("fit", help="fit a model on CSV/Parquet recordings", **common)
     fit.add_argument("data", help="CSV or Parquet file, one row per sample")
-    _add_data_options(fit, time=None)
+    _add_data_options(fit, file_order=True)
     fit.add_argument("--features", nargs="+", help="feature columns (default: all numeric)")
     fit.add_argument("--n-states", type=int, default=5, help="number of hidden states K")
     fit.add_argument("--n-init", type=int, default=1, help="EM restarts, the best one is kept")
@@ -471,8 +488,14 @@ def build_parser():
     )
     predict.add_argument("model", help="model file (portable JSON) written by 'skhmmgmr fit'")
     predict.add_argument("data", help="CSV or Parquet file")
-    _add_data_options(predict, time=None)
+    _add_data_options(predict, file_order=True)
     _add_output_options(predict, None, "output file (default: DATA_predicted.EXT)")
+    predict.add_argument(
+        "--prefix",
+        default="",
+        help="written before the names of the columns predict adds (estimate, estimate_std, "
+        "state_0, ...), when the data already has columns of those names",
+    )
     predict.set_defaults(handler=command_predict)
     return parser
 

@@ -103,7 +103,7 @@ def test_select_errors(tmp_path, capsys):
     path = tmp_path / "runs.csv"
     make_recordings().to_csv(path, index=False)
     assert main(["select", str(path), "--target", "torque", "--recording", "run"]) == 2
-    assert "missing column(s) ['time']" in capsys.readouterr().err
+    assert "missing the time column 'time'; name yours with --time." in capsys.readouterr().err
     bad = make_recordings().assign(split="holdout")
     bad.to_csv(path, index=False)
     argv = ["select", str(path), "--target", "torque", "--recording", "run", "--time", "t"]
@@ -118,7 +118,10 @@ def test_fit_predict_round_trip(tmp_path):
     model = tmp_path / "model.json"
     argv = ["fit", str(path), "--target", "torque", "--recording", "run", "--time", "t"]
     assert main([*argv, "--features", "f0", "f1", "--n-states", "2", "--output", str(model)]) == 0
-    assert main(["--quiet", "predict", str(model), str(path), "--recording", "run"]) == 0
+    assert (
+        main(["--quiet", "predict", str(model), str(path), "--recording", "run", "--time", "t"])
+        == 0
+    )
     result = pd.read_csv(tmp_path / "runs_predicted.csv")
     assert len(result) == len(data)
     assert {"estimate", "estimate_std", "state_0", "state_1"} <= set(result.columns)
@@ -132,7 +135,10 @@ def test_fit_predict_round_trip(tmp_path):
     [
         (["fit", "{tmp}/missing.csv"], "data file not found"),
         (["fit", "{tmp}/garbage.parquet"], "Cannot read"),
-        (["fit", "{tmp}/runs.csv", "--target", "nope", "--recording", "run"], "missing column"),
+        (
+            ["fit", "{tmp}/runs.csv", "--target", "nope", "--recording", "run", "--time", "t"],
+            "missing column",
+        ),
         (["predict", "{tmp}/missing.joblib", "{tmp}/runs.csv"], "model file not found"),
     ],
 )
@@ -248,3 +254,60 @@ def test_select_resamples_recordings_with_gaps_on_request(tmp_path, capsys):
     manifest = json.loads((tmp_path / "b" / "manifest.json").read_text())
     counts = manifest["details"]["recordings (train/validation/test)"].split("/")
     assert sum(map(int, counts)) == 7  # r2 split at its 5-s gap; the short gaps interpolated
+
+
+# --- one rule for the time column, and outputs that never replace the user's columns (#35) ---
+
+
+@pytest.mark.parametrize("command", ["fit", "predict", "select"])
+def test_every_command_needs_the_time_column_or_an_explicit_file_order(tmp_path, capsys, command):
+    """#35: fit took the rows in file order and then used the file's time column 't' as an
+    input ("fitted on 19 features"), while select refused the same file."""
+    path = tmp_path / "runs.csv"
+    make_recordings().to_csv(path, index=False)
+    model = tmp_path / "model.json"
+    argv = ["fit", str(path), "--target", "torque", "--recording", "run", "--time", "t"]
+    assert main(["--quiet", *argv, "--n-states", "2", "--output", str(model)]) == 0
+    given = {"fit": ["fit", str(path)], "predict": ["predict", str(model), str(path)]}
+    given["select"] = ["select", str(path)]
+    options = ["--target", "torque", "--recording", "run"]
+    assert main([*given[command], *options]) == 2
+    err = capsys.readouterr().err
+    assert "missing the time column 'time'; name yours with --time" in err
+    assert ("--time none" in err) == (command != "select")
+    if command == "select":
+        assert main([*given[command], *options, "--time", "none"]) == 2
+        assert "needs a time column" in capsys.readouterr().err
+
+
+def test_fit_names_its_inputs_and_never_takes_the_time_column(tmp_path, capsys):
+    path = tmp_path / "runs.csv"
+    make_recordings().rename(columns={"t": "time"}).to_csv(path, index=False)
+    argv = ["fit", str(path), "--target", "torque", "--recording", "run", "--n-states", "2"]
+    assert main([*argv, "--output", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    inputs = out.split("input(s): ")[1].split(";")[0].split(", ")
+    assert "time" not in inputs and inputs == ["f0", "f1", "f2"]
+    # --time none: file order, and a column 'time' is still never an input
+    assert main([*argv, "--time", "none", "--output", str(tmp_path / "n.json")]) == 0
+    assert "in file order" in capsys.readouterr().out
+
+
+def test_predict_never_replaces_the_users_columns(tmp_path, capsys):
+    """#35: predict replaced the values of the user's columns named estimate or state_0."""
+    data = make_recordings().assign(estimate=7.0)
+    path = tmp_path / "runs.csv"
+    data.to_csv(path, index=False)
+    model = tmp_path / "model.json"
+    fit = ["fit", str(path), "--target", "torque", "--recording", "run", "--time", "t"]
+    assert (
+        main(["--quiet", *fit, "--features", "f0", "--n-states", "2", "--output", str(model)]) == 0
+    )
+    predict = ["predict", str(model), str(path), "--recording", "run", "--time", "t"]
+    assert main(predict) == 2
+    assert "already has the column(s) ['estimate']" in capsys.readouterr().err
+    assert not (tmp_path / "runs_predicted.csv").exists()
+    assert main(["--quiet", *predict, "--prefix", "hmm_"]) == 0
+    result = pd.read_csv(tmp_path / "runs_predicted.csv")
+    assert (result["estimate"] == 7.0).all()
+    assert {"hmm_estimate", "hmm_estimate_std", "hmm_state_0", "hmm_state_1"} <= set(result)

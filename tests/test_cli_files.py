@@ -98,7 +98,7 @@ def test_a_repeated_time_is_refused_naming_recording_and_time(tmp_path, model, c
 
 def test_a_time_column_given_but_absent_is_named(runs, capsys):
     assert main(["fit", str(runs), "--target", "torque", "--recording", "run", "--time", "x"]) == 2
-    assert "missing column(s) ['x']" in _error(capsys)
+    assert "missing the time column 'x'" in _error(capsys)
 
 
 @pytest.mark.parametrize("ids", [("7", "007"), ("1e3", "1000"), ("TRUE", "True")])
@@ -171,7 +171,7 @@ def test_fit_refuses_to_overwrite_a_file_without_overwrite(tmp_path, runs, capsy
 
 def test_predict_refuses_to_overwrite_its_default_output(tmp_path, runs, model, capsys):
     (tmp_path / "runs_predicted.csv").write_text("mine")
-    argv = ["predict", str(model), str(runs), "--recording", "run"]
+    argv = ["predict", str(model), str(runs), "--recording", "run", "--time", "t"]
     assert main(argv) == 2
     assert "--overwrite" in _error(capsys)
     assert (tmp_path / "runs_predicted.csv").read_text() == "mine"
