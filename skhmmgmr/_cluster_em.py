@@ -51,25 +51,54 @@ class Partition:
         return values.shape[0], values.sum(axis=0), np.abs(values).max(axis=0)
 
 
-def load_partition(source, features, target, recording="recording", time="time"):
-    """Read one partition (a DataFrame or a parquet file path) on a worker."""
-    if isinstance(source, (str, os.PathLike)):
-        source = pd.read_parquet(source, columns=_columns_of(source, features, target, time))
+def load_partition(
+    source, features, target, recording="recording", time="time", *, name=None, stamp=None
+):
+    """Read one partition (a DataFrame or a parquet file path) on a worker.
+
+    ``name`` says which partition it is in errors; ``stamp`` (the file's modification time
+    and size, read by the client) is unused here: it is part of the task's key, so that a
+    file that changed is read again instead of served from an earlier task.
+    """
+    where = name or "a partition"
     names = [*features, target]
-    values = np.ascontiguousarray(source[names].to_numpy(dtype=float))
+    if isinstance(source, (str, os.PathLike)):
+        source = _read_parquet(source, [recording, *names], time, where)
+    missing = [c for c in dict.fromkeys([recording, *names]) if c not in source.columns]
+    if missing:
+        raise ValueError(
+            f"{where} lacks the column(s) {missing}; its columns are {list(source.columns)}"
+        )
+    if not len(source):  # a filtered dask DataFrame has empty partitions: nothing to fit
+        return Partition(np.empty((0, len(names))), None)
+    try:
+        values = np.ascontiguousarray(source[names].to_numpy(dtype=float))
+    except (TypeError, ValueError) as exc:
+        bad = next((c for c in names if not pd.api.types.is_numeric_dtype(source[c])), names)
+        raise ValueError(
+            f"{where}: the column(s) {bad!r} hold values that are not numbers ({exc})"
+        ) from None
     stamps = source[time].to_numpy() if time in source.columns else None
-    recordings = as_recordings(
-        source[recording].astype(str).to_numpy(), values.shape[0], time=stamps, min_length=2
-    )
-    check_finite(values, name="data", column_names=names, recordings=recordings)
+    try:
+        recordings = as_recordings(
+            source[recording].astype(str).to_numpy(), values.shape[0], time=stamps, min_length=2
+        )
+        check_finite(values, name="data", column_names=names, recordings=recordings)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
     return Partition(values, recordings)
 
 
-def _columns_of(path, features, target, time):
+def _read_parquet(path, columns, time, where):
+    """The columns of a parquet file that it has (plus ``time`` if present), errors named."""
     import pyarrow.parquet as pq
 
-    present = set(pq.read_schema(path).names)
-    return ["recording", *features, target, *([time] if time in present else [])]
+    try:
+        present = set(pq.read_schema(path).names)
+        wanted = [c for c in dict.fromkeys([*columns, time]) if c in present]
+        return pd.read_parquet(path, columns=wanted)
+    except (OSError, ValueError) as exc:  # pyarrow's ArrowInvalid is a ValueError
+        raise ValueError(f"{where}: the parquet file {str(path)!r} cannot be read: {exc}") from None
 
 
 def partition_summary(partition):
@@ -79,7 +108,7 @@ def partition_summary(partition):
         "n_rows": n_rows,
         "sums": sums,
         "magnitudes": magnitudes,
-        "ids": np.asarray(partition.recordings.ids),
+        "ids": np.asarray(partition.recordings.ids if n_rows else []),
         "longest": int(partition.recordings.lengths.max()) if n_rows else 0,
     }
 

@@ -16,6 +16,7 @@ Two ways past one machine:
   (:mod:`skhmmgmr._cluster_em`).
 """
 
+import os
 import warnings
 from contextlib import contextmanager
 
@@ -125,13 +126,40 @@ def _client_of(client):
 
 
 def _partitions(client, data, features, target):
-    """Futures of the partitions (:class:`~skhmmgmr._cluster_em.Partition`) on the workers."""
+    """Futures of the partitions (:class:`~skhmmgmr._cluster_em.Partition`) on the workers.
+
+    A parquet file's task is keyed by its path, modification time and size (read here): a
+    file that changed is read again. When the client cannot see the file (it lies on the
+    workers only), its task is never shared with another call."""
     if hasattr(data, "to_delayed"):  # a dask DataFrame
         import dask
 
         load = dask.delayed(load_partition, pure=True)
-        return client.compute([load(part, features, target) for part in data.to_delayed()])
-    return [client.submit(load_partition, part, features, target) for part in data]
+        name = "partition {} of the dask DataFrame".format
+        parts = data.to_delayed()
+        return client.compute(
+            [load(part, features, target, name=name(i)) for i, part in enumerate(parts)]
+        )
+    futures = []
+    for i, part in enumerate(data):
+        if isinstance(part, (str, os.PathLike)):
+            name, stamp = f"partition {i} (the file {str(part)!r})", _file_stamp(part)
+        else:
+            name, stamp = f"partition {i}", None
+        pure = stamp is not None or not isinstance(part, (str, os.PathLike))
+        futures.append(
+            client.submit(load_partition, part, features, target, name=name, stamp=stamp, pure=pure)
+        )
+    return futures
+
+
+def _file_stamp(path):
+    """(modification time in ns, size, inode) of a file the client sees, else None."""
+    try:
+        stat = os.stat(path)
+    except OSError:
+        return None
+    return stat.st_mtime_ns, stat.st_size, stat.st_ino
 
 
 def _check_recordings_whole(summaries):
@@ -228,7 +256,11 @@ def fit_on_cluster(estimator, data, *, features, target=TARGET, client=None):
     data : dask DataFrame or list of str, path or pandas DataFrame
         The recordings, one row per sample with a ``recording`` column (and ``time``, checked
         to increase, when present); every recording whole in one partition (a dask DataFrame's
-        partition, a parquet file or a DataFrame of the list), its rows in time order.
+        partition, a parquet file or a DataFrame of the list), its rows in time order. Empty
+        partitions (such as those of a filtered dask DataFrame) are left out. A parquet file
+        that changed since an earlier fit is read again (its task is keyed by the file's
+        modification time and size). A faulty partition (a missing column, text in a column,
+        a file that is not parquet) is named in the error.
     features : list of str
         Input columns, in the model's order.
     target : str, default="driver_torque"
@@ -255,6 +287,10 @@ def fit_on_cluster(estimator, data, *, features, target=TARGET, client=None):
     names = [*features, target]
     partitions = _partitions(client, data, features, target)
     summaries = client.gather([client.submit(partition_summary, p) for p in partitions])
+    kept = [i for i, summary in enumerate(summaries) if summary["n_rows"]]
+    if not kept:
+        raise ValueError(f"every one of the {len(summaries)} partition(s) of data is empty")
+    partitions, summaries = [partitions[i] for i in kept], [summaries[i] for i in kept]
     _check_recordings_whole(summaries)
     counts = [summary["n_rows"] for summary in summaries]
     check_enough_rows(sum(counts), estimator.n_states, len(names))

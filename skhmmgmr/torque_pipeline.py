@@ -194,6 +194,14 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
             )
         validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
         self._sources()
+        inputs = [str(name) for name in getattr(self, "feature_names_in_", ())]
+        taken = [name for name in self._derived_names() if name in inputs]
+        if taken:
+            raise ValueError(
+                f"X already has the column(s) {taken}, which SteeringFeatures derives: rename "
+                "them, or leave their source out (friction_velocity=None for the friction "
+                "input, load_columns or powers for the others)."
+            )
         return self
 
     def fit_transform(self, X, y=None, groups=None):
@@ -294,11 +302,30 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
         rows = read_row_order(X, groups)
         ordered = rows.to_filter_order(velocity)
         recordings = as_recordings(rows.groups, len(ordered))
+        if rows.time is not None:
+            self._check_period(np.asarray(rows.time, dtype=float), recordings)
         decay = math.exp(-self.sampling_period / self.velocity_filter)
         filtered = np.empty_like(ordered)
         for start, stop in zip(recordings.starts, recordings.stops, strict=True):
             filtered[start:stop] = low_pass(ordered[start:stop], decay)
         return rows.to_caller_order(filtered)
+
+    def _check_period(self, time, recordings):
+        """Refuse a time level whose median step in a recording is not ``sampling_period``
+        (within 1 %): the filter's time constant would be off by their ratio."""
+        for rec, start, stop in zip(
+            recordings.ids, recordings.starts, recordings.stops, strict=True
+        ):
+            if stop - start < 2:
+                continue
+            step = float(np.median(np.diff(time[start:stop])))
+            if abs(step - self.sampling_period) > 0.01 * self.sampling_period:
+                raise ValueError(
+                    f"The time level of X steps {step:.6g} s (median) in recording {rec!r}, but "
+                    f"sampling_period={self.sampling_period!r}: the velocity filter would run "
+                    f"{self.sampling_period / step:.3g} times too fast or slow. Pass the "
+                    "recordings' own period, or resample them (resample_recordings)."
+                )
 
     def _check_powers(self):
         for power in self.powers:

@@ -282,3 +282,95 @@ def test_select_command_on_a_scheduler_writes_the_local_tables(cluster, tmp_path
         )
     manifest = (tmp_path / "remote" / "manifest.json").read_text()
     assert address in manifest
+
+
+# --- #35: changed files are read again; faults name the partition or the file ----------------
+
+
+def test_a_parquet_file_that_changed_is_read_again(cluster, fit_data, tmp_path):
+    """Load tasks were keyed by path: while a task of the old contents was alive (another
+    fit, a future still held), a fit after the file changed was served the old rows."""
+    from skhmmgmr.cluster import _partitions
+
+    features = ["f0", "f1"]
+    params = dict(n_states=2, random_state=0, tol=1e-8, n_iter=50)
+    path = tmp_path / "part.parquet"
+    old = fit_data[fit_data["recording"].isin(["train0", "train1"])]
+    new = fit_data[fit_data["recording"].isin(["train2", "train3", "train4"])]
+    with distributed.Client(cluster) as client:
+        old.to_parquet(path)
+        held = _partitions(client, [str(path)], features, "driver_torque")
+        client.gather(held)
+        new.to_parquet(path)
+        again = _partitions(client, [str(path)], features, "driver_torque")
+        assert again[0].key != held[0].key
+        assert client.gather(again)[0].values.shape[0] == len(new)
+        after = fit_on_cluster(
+            HMMGMRRegressor(**params), [str(path)], features=features, client=client
+        )
+        del held, again
+    local = HMMGMRRegressor(**params).fit(
+        new[features], new["driver_torque"], groups=new["recording"]
+    )
+    _assert_same_fit(after, local)
+
+
+def test_empty_partitions_are_left_out(cluster, fit_data):
+    features = ["f0", "f1"]
+    params = dict(n_states=2, random_state=0, tol=1e-8, n_iter=50)
+    rows = fit_data[fit_data["recording"].isin(["train0", "train1"])]
+    with distributed.Client(cluster) as client:
+        remote = fit_on_cluster(
+            HMMGMRRegressor(**params),
+            [rows.iloc[:0], rows, rows.iloc[:0]],
+            features=features,
+            client=client,
+        )
+        with pytest.raises(ValueError, match="every one of the 2 partition"):
+            fit_on_cluster(
+                HMMGMRRegressor(**params), [rows.iloc[:0]] * 2, features=features, client=client
+            )
+    local = HMMGMRRegressor(**params).fit(
+        rows[features], rows["driver_torque"], groups=rows["recording"]
+    )
+    _assert_same_fit(remote, local)
+
+
+@pytest.mark.parametrize(
+    "fault, message",
+    [
+        (
+            "missing column",
+            r"partition 1 \(the file '.*part-1.parquet'\) lacks the column\(s\) \['f1'\]",
+        ),
+        ("text", r"partition 1 \(the file '.*part-1.parquet'\): the column\(s\) 'f0' hold values"),
+        (
+            "no recording",
+            r"partition 1 \(the file '.*part-1.parquet'\) lacks the column\(s\) \['recording'\]",
+        ),
+        (
+            "not parquet",
+            r"partition 1 \(the file '.*part-1.parquet'\): the parquet file .* cannot be read",
+        ),
+    ],
+)
+def test_a_faulty_partition_is_named(cluster, fit_data, tmp_path, fault, message):
+    rows = fit_data[fit_data["recording"].isin(["train0", "train1"])]
+    other = fit_data[fit_data["recording"].isin(["train2"])]
+    paths = [tmp_path / "part-0.parquet", tmp_path / "part-1.parquet"]
+    rows.to_parquet(paths[0])
+    if fault == "missing column":
+        other.drop(columns="f1").to_parquet(paths[1])
+    elif fault == "text":
+        other.assign(f0="abc").to_parquet(paths[1])
+    elif fault == "no recording":
+        other.drop(columns="recording").to_parquet(paths[1])
+    else:
+        paths[1].write_text("not parquet")
+    with distributed.Client(cluster) as client, pytest.raises(ValueError, match=message):
+        fit_on_cluster(
+            HMMGMRRegressor(n_states=2),
+            [str(p) for p in paths],
+            features=["f0", "f1"],
+            client=client,
+        )

@@ -329,3 +329,35 @@ def test_recordings_reach_the_filter_through_routing(recordings):
     )
     by_hand = HMMGMRRegressor(n_states=2, n_iter=5, random_state=0).fit(derived, y, groups=groups)
     np.testing.assert_array_equal(routed, by_hand.predict(derived, groups=groups))
+
+
+def test_an_input_named_like_a_derived_one_is_refused():
+    """#35: an input column named steering_friction gave duplicate columns and a narwhals
+    error at fit."""
+    X = _frame().assign(steering_friction=0.0)
+    with pytest.raises(ValueError, match=r"X already has the column\(s\) \['steering_friction'\]"):
+        SteeringFeatures().fit(X)
+    assert (
+        "steering_friction"
+        not in SteeringFeatures(friction_velocity=None).fit_transform(X).columns[X.shape[1] :]
+    )
+    cube = _frame().assign(steering_wheel_angle_cube=0.0)
+    with pytest.raises(ValueError, match="'steering_wheel_angle_cube'"):
+        make_torque_pipeline(n_states=2).fit(cube, np.zeros(len(cube)))
+
+
+def test_a_period_the_time_level_contradicts_is_refused():
+    """#35: sampling_period=0.05 with a panel stepping 0.01 s was accepted (friction input off
+    by up to 1.71)."""
+    rng = np.random.default_rng(4)
+    X = pd.DataFrame(rng.normal(size=(60, 3)), columns=COLUMNS)
+    X.index = pd.MultiIndex.from_arrays(
+        [np.repeat(["a", "b"], 30), np.tile(np.arange(30) * 0.01, 2)], names=["recording", "time"]
+    )
+    wrong = SteeringFeatures(velocity_filter=0.02, sampling_period=0.05)
+    with pytest.raises(
+        ValueError, match=r"steps 0.01 s \(median\) in recording 'a', but sampling_period=0.05"
+    ):
+        wrong.fit_transform(X)
+    right = SteeringFeatures(velocity_filter=0.02, sampling_period=0.01).fit_transform(X)
+    assert np.isfinite(right["steering_friction"]).all()
