@@ -32,7 +32,7 @@ from ._fitted import FittedHMMGMR
 from ._gaussian import NotPositiveDefiniteError
 from ._gmr import filter_state_probabilities, gmr_estimates, mix_estimates
 from ._missing import observed_counts
-from ._panel import read_row_order
+from ._panel import align_target, read_row_order
 from ._prediction_inputs import read_inputs
 from ._sequences import as_recordings
 from ._validation import (
@@ -198,6 +198,7 @@ class AdaptMixin:
                     "they must describe the same rows."
                 )
             return self
+        y = align_target(X, y)
         rows = read_row_order(X, groups, time)
         X, y, groups = rows.to_filter_order(X), rows.to_filter_order(y), rows.groups
         allow_nan = self.missing_values != "error"

@@ -66,6 +66,32 @@ def has_recording_index(X):
     return index_levels(X)[0] is not None
 
 
+def align_target(X, y):
+    """``y`` paired with the rows of ``X`` by label when ``X`` is a panel (recordings in its
+    index) and ``y`` a pandas object: reordered to ``X``'s rows if its index holds the same
+    labels in another order, refused if it holds other labels. Anything else is returned as
+    it is (an array pairs by position)."""
+    if not isinstance(y, pd.Series | pd.DataFrame) or not has_recording_index(X):
+        return y
+    if y.index.equals(X.index):
+        return y
+    same = (
+        len(y) == len(X)
+        and X.index.is_unique
+        and y.index.is_unique
+        and y.index.nlevels == X.index.nlevels
+        and y.index.isin(X.index).all()
+    )
+    if not same:
+        raise ValueError(
+            f"y is a pandas object whose index does not hold the rows of X (X's index has the "
+            f"levels {list(X.index.names)}, y's {list(y.index.names)}; {len(X)} and {len(y)} "
+            "rows): pass y with X's index (such as a column of the same panel), or an array in "
+            "X's row order."
+        )
+    return y.reindex(X.index)
+
+
 def read_row_order(X, groups=None, time=None, *, sort_recordings=False):
     """Recording ids, time stamps and row order of a call, from arguments or the index of X.
 

@@ -20,7 +20,7 @@ from ._estimator_io import ModelIOMixin
 from ._fitted import FittedHMMGMR, Standardization
 from ._gmr import filter_state_probabilities, gmr_estimates
 from ._missing import observed_counts
-from ._panel import read_row_order
+from ._panel import align_target, read_row_order
 from ._prediction_inputs import read_inputs, warn_if_one_long_recording
 from ._sequences import as_recordings
 from ._stale_inputs import MISSING_VALUES, learn_stale_noise
@@ -242,6 +242,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         emission_family(self.covariance_type)  # refuses "diag" and "spherical", saying why
         # Recordings of an indexed X in order of their ids: the initialization reads the rows
         # in order, so a shuffle of the rows (a resampling search) must not change it.
+        y = align_target(X, y)
         rows = read_row_order(X, groups, time, sort_recordings=True)
         X, y, groups, time = (
             rows.to_filter_order(X),
@@ -427,6 +428,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         -------
         score : float
         """
+        y = align_target(X, y)
         check_target_finite(y, None)  # names y's column and row, not "Input contains NaN"
         return r2_score(y, self.predict(X, groups=groups), sample_weight=sample_weight)
 

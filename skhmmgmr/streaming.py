@@ -26,7 +26,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from ._fitted import FittedHMMGMR
 from ._missing import gmr_given_observed
-from ._panel import read_row_order
+from ._panel import align_target, read_row_order
 from ._sequences import as_recordings
 from ._stale_inputs import MISSING_VALUES, carried_inputs
 from ._stream_adaptation import OnlineMeans, check_adaptation
@@ -502,6 +502,7 @@ class FilterStream:
         std : ndarray of the same shape, only when ``return_std`` is True
         flags : ndarray of str of shape (n_samples,), only when ``return_flag`` is True
         """
+        y = align_target(X, y)
         rows = read_row_order(X)
         names = getattr(self, "feature_names_in_", None)
         X = as_batch(rows.to_filter_order(X), names, self.n_features_in_)

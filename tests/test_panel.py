@@ -1,5 +1,6 @@
 """Recordings in the index (the panel form): reading ids, time and the filter's row order."""
 
+import pickle
 import warnings
 
 import numpy as np
@@ -194,3 +195,56 @@ def test_a_selector_fitted_on_the_panel_equals_one_fitted_with_groups(drives):
     on_panel.fit(shuffled[features], shuffled["driver_torque"])
     pd.testing.assert_frame_equal(on_panel.results_, grouped.results_)
     assert list(on_panel.get_feature_names_out()) == list(grouped.get_feature_names_out())
+
+
+# --- #35: a y with an index is paired with X's rows by label, or refused ----------------------
+
+
+def _shuffled_panel(seed=0):
+    rng = np.random.default_rng(seed)
+    n = 240
+    X = pd.DataFrame(np.cumsum(rng.normal(scale=0.3, size=(n, 2)), axis=0), columns=["a", "b"])
+    y = pd.Series(np.tanh(X["a"]) - 0.5 * X["b"] + rng.normal(scale=0.05, size=n), name="y")
+    index = pd.MultiIndex.from_arrays(
+        [np.repeat(["r0", "r1", "r2", "r3"], 60), np.tile(np.arange(60) * 0.05, 4)],
+        names=["recording", "time"],
+    )
+    X.index = y.index = index
+    return X, y
+
+
+def test_fit_adapt_and_streams_pair_y_with_x_by_label():
+    """y's labels in another order were paired by position (fitted means 3.1 apart)."""
+    from skhmmgmr import HMMGMRRegressor
+
+    X, y = _shuffled_panel()
+    other_order = y.sample(frac=1.0, random_state=1)
+    params = {"n_states": 2, "random_state": 0}
+    same = HMMGMRRegressor(**params).fit(X, y)
+    shuffled = HMMGMRRegressor(**params).fit(X, other_order)
+    np.testing.assert_allclose(shuffled.means_, same.means_, rtol=0, atol=1e-10)
+    assert shuffled.score(X, other_order) == pytest.approx(same.score(X, y), abs=1e-12)
+    adapted = pickle.loads(pickle.dumps(same)).adapt(X, y + 0.3)
+    shuffled_adapted = pickle.loads(pickle.dumps(same)).adapt(X, other_order + 0.3)
+    np.testing.assert_allclose(shuffled_adapted.means_, adapted.means_, rtol=0, atol=1e-10)
+    stream = same.filter_stream(relevance=8.0)
+    first = stream.update_batch(X, y=y)
+    second = same.filter_stream(relevance=8.0).update_batch(X, y=other_order)
+    np.testing.assert_allclose(second, first, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("change", ["other labels", "fewer rows", "plain index"])
+def test_a_y_whose_index_is_not_xs_is_refused(change):
+    from skhmmgmr import HMMGMRRegressor
+
+    X, y = _shuffled_panel()
+    if change == "other labels":
+        y = y.rename(index={"r3": "r9"}, level="recording")
+    elif change == "fewer rows":
+        y = y.iloc[:-1]
+    else:
+        y = y.reset_index(drop=True)
+    with pytest.raises(ValueError, match="y is a pandas object whose index does not hold the rows"):
+        HMMGMRRegressor(n_states=2, random_state=0).fit(X, y)
+    # an array pairs by position, as scikit-learn does
+    HMMGMRRegressor(n_states=2, random_state=0).fit(X, np.asarray(_shuffled_panel()[1]))
