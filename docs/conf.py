@@ -14,6 +14,9 @@ extensions = [
     "sphinx.ext.autosummary",
     "sphinx.ext.intersphinx",
     "sphinx.ext.mathjax",
+    # copies MathJax into _static/mathjax and points the pages at it: no CDN, so formulas
+    # render offline (a page checks for any script from the network: .ci/run)
+    "sphinx-mathjax-offline",
     "numpydoc",
     "sphinx_gallery.gen_gallery",
 ]
@@ -46,6 +49,8 @@ sphinx_gallery_conf = {
     "remove_config_comments": True,
     "abort_on_example_error": True,
     "within_subsection_order": "FileNameSortKey",
+    # the computation-times pages load jQuery and DataTables from CDNs: the docs work offline
+    "write_computation_times": False,
 }
 os.environ.setdefault("MPLBACKEND", "Agg")
 

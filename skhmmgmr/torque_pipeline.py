@@ -408,11 +408,13 @@ def make_torque_pipeline(
     The pipeline is ``SteeringFeatures`` (step ``"steering_features"``) then
     :class:`~skhmmgmr.HMMGMRRegressor` (step ``"hmmgmr"``). It takes data frames with the
     package's column names (:data:`skhmmgmr.datasets.FEATURE_NAMES`); recordings reach the
-    regressor as ``groups`` (``hmmgmr__groups=`` in ``fit``, ``groups=`` in ``predict``, or
-    routed with metadata routing on) or in the index of a panel
-    (:func:`skhmmgmr.datasets.to_panel`). On the simulator's protocol it is more accurate than
-    a default gradient-boosting regressor and smoother (see "When to use HMM-GMR" in the user
-    guide, and ``benchmarks/bench_baselines.py``).
+    steps in the index of a panel (:func:`skhmmgmr.datasets.to_panel`), or as ``groups``
+    routed with metadata routing on. With routing off, ``hmmgmr__groups=`` in ``fit`` reaches
+    the regressor only: fine without ``velocity_filter``, but with it the filter of
+    ``SteeringFeatures`` would run across recordings, so use the index or routing then. On the
+    simulator's protocol it is more accurate than a default gradient-boosting regressor and
+    smoother (see "When to use HMM-GMR" in the user guide, and
+    ``benchmarks/bench_baselines.py``).
 
     Parameters
     ----------
