@@ -153,8 +153,15 @@ def test_a_segment_the_loader_cannot_decode_stays_in_the_cache(tmp_path):
     "location, reason",
     [
         ("/Chunk_1.zip", "too many redirects"),
-        ("file:///etc/passwd", "redirected to file:///etc/passwd, which is not an http"),
-        ("ftp://example.org/Chunk_1.zip", "redirected to ftp://example.org/Chunk_1.zip, which"),
+        # aiohttp 3.9 names the location; older releases say only what they refuse
+        (
+            "file:///etc/passwd",
+            "(redirected to file:///etc/passwd, which is not an http|Can redirect only to http)",
+        ),
+        (
+            "ftp://example.org/Chunk_1.zip",
+            "(redirected to ftp://example.org/Chunk_1.zip, which|Can redirect only to http)",
+        ),
     ],
 )
 def test_redirects_that_cannot_be_followed_say_why(tmp_path, location, reason):

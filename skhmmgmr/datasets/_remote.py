@@ -114,13 +114,16 @@ def _causes(exc):
 
 
 def is_not_found(exc):
-    """Whether the failure ``exc`` means the server has no such file (and nothing worse)."""
-    causes = _causes(exc)
-    statuses = [getattr(c, "status", None) for c in causes if getattr(c, "status", None)]
+    """Whether the failure ``exc`` means the server has no such file (and nothing worse): a
+    FileNotFoundError caused by nothing but an HTTP 404, or by nothing."""
+    causes = [c for c in _causes(exc) if not isinstance(c, DownloadError)]
     return (
-        any(isinstance(c, FileNotFoundError) for c in causes)
-        and all(s == 404 for s in statuses)
-        and not any(_kind(c) in _REASONS for c in causes)
+        bool(causes)
+        and isinstance(causes[0], FileNotFoundError)
+        and all(
+            isinstance(c, FileNotFoundError) or getattr(c, "status", None) == 404
+            for c in causes[1:]
+        )
     )
 
 
@@ -130,6 +133,7 @@ _REASONS = {
     "NonHttpUrlRedirectClientError": "redirected to {text}, which is not an http(s) URL: refused",
     "InvalidUrlRedirectClientError": "redirected to an invalid URL, {text}",
 }
+_NOT_FOUND = "no such file on the server (HTTP 404 or a missing local file)"
 
 
 def _kind(exc):
@@ -137,22 +141,29 @@ def _kind(exc):
 
 
 def _reason(url, exc, timeout):
-    """What went wrong, in words: the innermost known cause of ``exc``, else its own text."""
-    for cause in reversed(_causes(exc)):
+    """What went wrong, in words: ``exc``'s own text, or when that names only the URL (as
+    fsspec's FileNotFoundError of any failed request does), what its causes say: a known
+    aiohttp error, an HTTP status, a message of their own."""
+    if isinstance(exc, TimeoutError):
+        detail = f" ({exc})" if str(exc) else ""
+        return f"timed out, no answer within timeout={timeout} s{detail}"
+    for cause in _causes(exc):  # aiohttp errors whose text says nothing of what happened
         kind = _kind(cause)
         if kind is not None:
             return _REASONS[kind].format(text=str(cause))
+    text = str(exc).strip().rstrip(".")
+    if text.strip("'\"") not in ("", url):
+        return text
+    for cause in reversed(_causes(exc)[1:]):
         status = getattr(cause, "status", None)
         if isinstance(status, int) and status >= 400:
             return f"the server answered HTTP {status} {getattr(cause, 'message', '')}".strip()
-    if isinstance(exc, TimeoutError):
-        return f"timed out, no answer within timeout={timeout} s" + (
-            f" ({exc})" if str(exc) else ""
-        )
-    text = str(exc).strip().rstrip(".")
-    if isinstance(exc, FileNotFoundError) and text in ("", url, repr(url)):
-        return "no such file on the server (HTTP 404 or a missing local file)"
-    return text if text and text != url else f"{type(exc).__name__} {text}".strip()
+        said = str(cause).strip().rstrip(".")
+        if not isinstance(cause, FileNotFoundError) and said.strip("'\"") not in ("", url):
+            return said  # such as "Can redirect only to http or https" (older aiohttp)
+    if isinstance(exc, FileNotFoundError):
+        return _NOT_FOUND
+    return f"{type(exc).__name__} {text}".strip()
 
 
 def failure(url, exc, timeout):
