@@ -1,0 +1,101 @@
+"""Files written by skhmmgmr 0.1.0 still load: portable JSON bit for bit, pickles by class path.
+
+The fixtures in ``tests/fixtures/`` were written by 0.1.0 (``make_legacy_fixtures.py``), before
+the package moved from one flat folder into subpackages: portable model files, the predictions
+0.1.0 made from them, a pickled fitted regressor and every class path 0.1.0 defined.
+"""
+
+import json
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from skhmmgmr import FilterStream, HMMGMRRegressor
+from skhmmgmr.portable import load_json, read_model
+
+FIXTURES = Path(__file__).resolve().parent / "fixtures"
+CASES = ("full", "tied", "marginalize", "carry_forward")
+
+
+@pytest.fixture(scope="module")
+def expected():
+    with np.load(FIXTURES / "legacy_0_1_0_predictions.npz") as arrays:
+        return dict(arrays)
+
+
+def _inputs(expected, case):
+    return expected["X"] if case in ("full", "tied") else expected["X_gaps"]
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_a_0_1_0_json_file_predicts_bit_for_bit(expected, case):
+    model = HMMGMRRegressor.from_json(FIXTURES / f"legacy_0_1_0_{case}.json")
+    X, groups = _inputs(expected, case), expected["groups"]
+    mean, std = model.predict(X, groups=groups, return_std=True)
+    assert np.array_equal(mean, expected[f"{case}_mean"])
+    assert np.array_equal(std, expected[f"{case}_std"])
+    proba = model.predict_state_proba(X, groups=groups)
+    assert np.array_equal(proba, expected[f"{case}_proba"])
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_a_0_1_0_json_file_streams_bit_for_bit(expected, case):
+    model = HMMGMRRegressor.from_json(FIXTURES / f"legacy_0_1_0_{case}.json")
+    X, groups = _inputs(expected, case), expected["groups"]
+    first = X[groups == groups[0]]
+    mean, std = model.filter_stream().update_batch(first, return_std=True)
+    assert np.array_equal(mean, expected[f"{case}_stream_mean"])
+    assert np.array_equal(std, expected[f"{case}_stream_std"])
+    # The file read without the estimator: the same fitted model, the same stream.
+    portable = read_model(load_json(FIXTURES / f"legacy_0_1_0_{case}.json"))
+    missing = portable.estimator_params["missing_values"]
+    stream = FilterStream(portable.model, missing_values=missing)
+    assert np.array_equal(stream.update_batch(first), expected[f"{case}_stream_mean"])
+
+
+def test_a_0_1_0_json_file_keeps_its_covariance_form_and_stale_inputs():
+    tied = HMMGMRRegressor.from_json(FIXTURES / "legacy_0_1_0_tied.json")
+    assert tied.covariance_type == "tied"
+    carried = HMMGMRRegressor.from_json(FIXTURES / "legacy_0_1_0_carry_forward.json")
+    assert carried.missing_values == "carry_forward"
+    assert "stale_inputs" in load_json(FIXTURES / "legacy_0_1_0_carry_forward.json")
+
+
+def _legacy_classes():
+    data = json.loads((FIXTURES / "legacy_0_1_0_classes.json").read_text())
+    assert data["version"] == "0.1.0"
+    return [tuple(pair) for pair in data["classes"]]
+
+
+@pytest.mark.parametrize("module, qualname", _legacy_classes())
+def test_every_0_1_0_class_path_resolves_as_a_pickle_names_it(module, qualname):
+    # A pickle or a skops file names a class by its module and qualified name; the crafted
+    # pickle holds that reference alone, so the check needs no array written by numpy 2.
+    reference = f"c{module}\n{qualname}\n.".encode()
+    found = pickle.loads(reference)
+    assert found.__name__ == qualname.rsplit(".", 1)[-1]
+    assert found.__module__.startswith("skhmmgmr")
+
+
+@pytest.mark.skipif(
+    int(np.__version__.split(".")[0]) < 2,
+    reason="the 0.1.0 pickle's arrays were written by numpy 2 (numpy._core)",
+)
+def test_a_0_1_0_pickle_loads_and_predicts_the_same(expected):
+    with open(FIXTURES / "legacy_0_1_0_regressor.pkl", "rb") as file:
+        saved = pickle.load(file)
+    model, stream = saved["regressor"], saved["stream"]
+    assert isinstance(model, HMMGMRRegressor)
+    assert isinstance(stream, FilterStream)
+    from_json = HMMGMRRegressor.from_json(FIXTURES / "legacy_0_1_0_carry_forward.json")
+    X, groups = expected["X_gaps"], expected["groups"]
+    mean, std = model.predict(X, groups=groups, return_std=True)
+    want_mean, want_std = from_json.predict(X, groups=groups, return_std=True)
+    np.testing.assert_allclose(mean, want_mean, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(std, want_std, rtol=1e-12, atol=1e-12)
+    first = X[groups == groups[0]]
+    np.testing.assert_allclose(
+        stream.update_batch(first), from_json.filter_stream().update_batch(first), rtol=1e-12
+    )
