@@ -1,8 +1,9 @@
-"""Files written by skhmmgmr 0.1.0 still load: portable JSON bit for bit, pickles by class path.
+"""Files written by skhmmgmr 0.1.0 still load: portable JSON bit for bit, pickles and skops too.
 
 The fixtures in ``tests/fixtures/`` were written by 0.1.0 (``make_legacy_fixtures.py``), before
 the package moved from one flat folder into subpackages: portable model files, the predictions
-0.1.0 made from them, a pickled fitted regressor and every class path 0.1.0 defined.
+0.1.0 made from them, a fitted regressor pickled and as a skops file, and every class path and
+public name 0.1.0 defined.
 """
 
 import json
@@ -64,9 +65,10 @@ def test_a_0_1_0_json_file_keeps_its_covariance_form_and_stale_inputs():
 
 
 def _legacy_classes():
+    # Private classes (one: the command line's argparse formatter) are never saved in a file.
     data = json.loads((FIXTURES / "legacy_0_1_0_classes.json").read_text())
     assert data["version"] == "0.1.0"
-    return [tuple(pair) for pair in data["classes"]]
+    return [tuple(pair) for pair in data["classes"] if not pair[1].startswith("_")]
 
 
 @pytest.mark.parametrize("module, qualname", _legacy_classes())
@@ -89,13 +91,23 @@ def test_a_0_1_0_pickle_loads_and_predicts_the_same(expected):
     model, stream = saved["regressor"], saved["stream"]
     assert isinstance(model, HMMGMRRegressor)
     assert isinstance(stream, FilterStream)
-    from_json = HMMGMRRegressor.from_json(FIXTURES / "legacy_0_1_0_carry_forward.json")
     X, groups = expected["X_gaps"], expected["groups"]
     mean, std = model.predict(X, groups=groups, return_std=True)
-    want_mean, want_std = from_json.predict(X, groups=groups, return_std=True)
-    np.testing.assert_allclose(mean, want_mean, rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(std, want_std, rtol=1e-12, atol=1e-12)
+    assert np.array_equal(mean, expected["carry_forward_direct_mean"])
+    assert np.array_equal(std, expected["carry_forward_direct_std"])
     first = X[groups == groups[0]]
-    np.testing.assert_allclose(
-        stream.update_batch(first), from_json.filter_stream().update_batch(first), rtol=1e-12
-    )
+    assert np.array_equal(stream.update_batch(first), model.filter_stream().update_batch(first))
+
+
+def test_a_0_1_0_skops_file_loads_with_its_trusted_types_and_predicts_the_same(expected):
+    sio = pytest.importorskip("skops.io")
+    path = FIXTURES / "legacy_0_1_0_regressor.skops"
+    untrusted = sio.get_untrusted_types(file=path)
+    # The file names 0.1.0's private modules; they load as the modules of today.
+    assert "skhmmgmr._fitted.FittedHMMGMR" in untrusted
+    model = sio.load(path, trusted=untrusted)
+    assert type(model) is HMMGMRRegressor
+    X, groups = expected["X_gaps"], expected["groups"]
+    mean, std = model.predict(X, groups=groups, return_std=True)
+    assert np.array_equal(mean, expected["carry_forward_direct_mean"])
+    assert np.array_equal(std, expected["carry_forward_direct_std"])
