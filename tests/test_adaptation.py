@@ -9,8 +9,8 @@ import pytest
 from scipy.stats import multivariate_normal
 
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr._em import baum_welch
-from skhmmgmr._sequences import as_recordings
+from skhmmgmr._core._sequences import as_recordings
+from skhmmgmr._hmm._em import baum_welch
 from skhmmgmr.datasets import shift_target
 
 

@@ -19,8 +19,9 @@ import pytest
 from _protocol_data import PERIOD, make_protocol
 from sklearn.model_selection import PredefinedSplit
 
-from skhmmgmr import HMMGMRRegressor, _cluster_search, _evaluation
-from skhmmgmr.cluster import WORKER_ENVIRONMENT, fit_on_cluster, use_cluster
+from skhmmgmr import HMMGMRRegressor
+from skhmmgmr._search import _evaluation
+from skhmmgmr.cluster import WORKER_ENVIRONMENT, _scatter, fit_on_cluster, use_cluster
 from skhmmgmr.feature_selection import ExhaustiveFeatureSelector
 from skhmmgmr.selection import select_parameters
 
@@ -54,7 +55,7 @@ def cluster():
         env=WORKER_ENVIRONMENT,
     ) as cluster:
         yield cluster
-    _cluster_search.release_scattered()
+    _scatter.release_scattered()
 
 
 @pytest.fixture(scope="module")

@@ -1,16 +1,8 @@
 """Driving data: an embedded lane-keeping simulator and loaders for public and own recordings."""
 
-from .._panel import to_panel
-from ._base import clear_data_home, get_data_home
-from ._calibration import CALIBRATION_BANDS, THESIS_TABLE_C2, calibration_table
-from ._comma2k19 import load_comma2k19_segment
-from ._comma2k19_scan import scan_comma2k19
-from ._driver import DRIVER_STYLES, DriverParameters
-from ._fetch import COMMA2K19_URL, fetch_comma2k19
-from ._protocol import make_driving_protocol
-from ._recordings import load_recordings
-from ._resample import resample_recordings
-from ._schema import (
+from .._core._panel import to_panel
+from .._core._public import publish
+from .._core._schema import (
     DRIVER,
     FEATURE_NAMES,
     FEATURE_UNITS,
@@ -20,6 +12,15 @@ from ._schema import (
     TARGET,
     TIME,
 )
+from ._base import clear_data_home, get_data_home
+from ._calibration import CALIBRATION_BANDS, THESIS_TABLE_C2, calibration_table
+from ._comma2k19 import load_comma2k19_segment
+from ._comma2k19_scan import scan_comma2k19
+from ._driver import DRIVER_STYLES, DriverParameters
+from ._fetch import COMMA2K19_URL, fetch_comma2k19
+from ._protocol import make_driving_protocol
+from ._recordings import load_recordings
+from ._resample import resample_recordings
 from ._shift import shift_target
 from ._simulator import make_lane_keeping
 
@@ -50,3 +51,5 @@ __all__ = [
     "TARGET",
     "TIME",
 ]
+
+publish(globals())
