@@ -26,6 +26,19 @@ def expected():
         return dict(arrays)
 
 
+def assert_same(actual, expected, key):
+    """``actual`` equals ``expected[key]``: bit for bit on the numpy that computed it.
+
+    The code path is the same on every stack, but another numpy (with its own OpenBLAS, such as
+    the oldest supported one, 1.24.1) rounds sums and products differently: 1e-15 apart, so
+    there the check is to 1e-12.
+    """
+    if np.__version__ == str(expected["numpy_version"]):
+        assert np.array_equal(actual, expected[key])
+    else:
+        np.testing.assert_allclose(actual, expected[key], rtol=0, atol=1e-12)
+
+
 def _inputs(expected, case):
     return expected["X"] if case in ("full", "tied") else expected["X_gaps"]
 
@@ -35,10 +48,10 @@ def test_a_0_1_0_json_file_predicts_bit_for_bit(expected, case):
     model = HMMGMRRegressor.from_json(FIXTURES / f"legacy_0_1_0_{case}.json")
     X, groups = _inputs(expected, case), expected["groups"]
     mean, std = model.predict(X, groups=groups, return_std=True)
-    assert np.array_equal(mean, expected[f"{case}_mean"])
-    assert np.array_equal(std, expected[f"{case}_std"])
+    assert_same(mean, expected, f"{case}_mean")
+    assert_same(std, expected, f"{case}_std")
     proba = model.predict_state_proba(X, groups=groups)
-    assert np.array_equal(proba, expected[f"{case}_proba"])
+    assert_same(proba, expected, f"{case}_proba")
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -47,13 +60,13 @@ def test_a_0_1_0_json_file_streams_bit_for_bit(expected, case):
     X, groups = _inputs(expected, case), expected["groups"]
     first = X[groups == groups[0]]
     mean, std = model.filter_stream().update_batch(first, return_std=True)
-    assert np.array_equal(mean, expected[f"{case}_stream_mean"])
-    assert np.array_equal(std, expected[f"{case}_stream_std"])
+    assert_same(mean, expected, f"{case}_stream_mean")
+    assert_same(std, expected, f"{case}_stream_std")
     # The file read without the estimator: the same fitted model, the same stream.
     portable = read_model(load_json(FIXTURES / f"legacy_0_1_0_{case}.json"))
     missing = portable.estimator_params["missing_values"]
     stream = FilterStream(portable.model, missing_values=missing)
-    assert np.array_equal(stream.update_batch(first), expected[f"{case}_stream_mean"])
+    assert_same(stream.update_batch(first), expected, f"{case}_stream_mean")
 
 
 def test_a_0_1_0_json_file_keeps_its_covariance_form_and_stale_inputs():
@@ -93,8 +106,8 @@ def test_a_0_1_0_pickle_loads_and_predicts_the_same(expected):
     assert isinstance(stream, FilterStream)
     X, groups = expected["X_gaps"], expected["groups"]
     mean, std = model.predict(X, groups=groups, return_std=True)
-    assert np.array_equal(mean, expected["carry_forward_direct_mean"])
-    assert np.array_equal(std, expected["carry_forward_direct_std"])
+    assert_same(mean, expected, "carry_forward_direct_mean")
+    assert_same(std, expected, "carry_forward_direct_std")
     first = X[groups == groups[0]]
     assert np.array_equal(stream.update_batch(first), model.filter_stream().update_batch(first))
 
@@ -109,5 +122,5 @@ def test_a_0_1_0_skops_file_loads_with_its_trusted_types_and_predicts_the_same(e
     assert type(model) is HMMGMRRegressor
     X, groups = expected["X_gaps"], expected["groups"]
     mean, std = model.predict(X, groups=groups, return_std=True)
-    assert np.array_equal(mean, expected["carry_forward_direct_mean"])
-    assert np.array_equal(std, expected["carry_forward_direct_std"])
+    assert_same(mean, expected, "carry_forward_direct_mean")
+    assert_same(std, expected, "carry_forward_direct_std")
