@@ -121,3 +121,20 @@ def test_every_public_name_written_in_a_private_module_is_in_the_api_reference()
         and exporters != ["skhmmgmr.cli"]
     ]
     assert not missing, f"docs/api.rst does not list {missing}"
+
+
+def test_the_benchmarks_import_names_that_exist():
+    # The benchmarks run by hand, not in the suite: their imports of the package are checked here.
+    import ast
+
+    missing = []
+    for path in sorted((Path(__file__).resolve().parents[1] / "benchmarks").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("skhmmgmr"):
+                module = import_module(node.module)
+                missing += [
+                    f"{path.name}:{node.lineno}: {node.module}.{alias.name}"
+                    for alias in node.names
+                    if not hasattr(module, alias.name)
+                ]
+    assert not missing, "imports of names that do not exist:\n" + "\n".join(missing)
