@@ -12,7 +12,7 @@ One pass per recording does everything the engine splits into stages:
 
 Recordings run in parallel (``prange``) in a fixed number of groups of about equal rows, each
 group into its own accumulators, summed at the end in group order (the result does not
-depend on the number of threads). The M-step is the package's (:func:`skhmmgmr._em.m_step`):
+depend on the number of threads). The M-step is the package's (:func:`skhmmgmr._hmm._em.m_step`):
 its cost is negligible, and the two log-likelihood histories then differ by round-off only
 (``tests/test_fused_reference.py``).
 """
@@ -20,8 +20,8 @@ its cost is negligible, and the two log-likelihood histories then differ by roun
 import numpy as np
 from numba import njit, prange
 
-from skhmmgmr._em import HMMParameters, Statistics, m_step
-from skhmmgmr._emissions import MomentStatistics
+from skhmmgmr._hmm._em import HMMParameters, Statistics, m_step
+from skhmmgmr._hmm._emissions import MomentStatistics
 
 # exp() below this is subnormal or zero: the frame is set to zero.
 UNDERFLOW = -708.0
@@ -168,7 +168,7 @@ def recording_groups(bounds, n_groups=GROUPS):
 
 
 def fused_e_step(X, bounds, params, shift):
-    """:class:`skhmmgmr._em.Statistics` of rows ``X`` in recordings ``bounds`` (n + 1 edges)."""
+    """:class:`~skhmmgmr._hmm._em.Statistics` of rows ``X`` in recordings ``bounds`` (n + 1)."""
     emissions = params.emissions
     bounds = np.asarray(bounds, dtype=np.int64)
     factors = emissions.precisions_chol

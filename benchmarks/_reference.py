@@ -25,9 +25,9 @@ from sklearn.mixture._gaussian_mixture import (
 from sklearn.utils import check_random_state
 
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr._em import EMResult, HMMParameters
-from skhmmgmr._em_init import INIT_SAMPLE_ROWS
-from skhmmgmr._emissions import MIN_STATE_WEIGHT, FullCovariance
+from skhmmgmr._hmm._em import EMResult, HMMParameters
+from skhmmgmr._hmm._em_init import INIT_SAMPLE_ROWS
+from skhmmgmr._hmm._emissions import MIN_STATE_WEIGHT, FullCovariance
 
 
 def _gaussians(resp, X, reg_covar, previous=None, prior_scale=None):
@@ -89,7 +89,7 @@ def _e_step(X, bounds, params):
 
 
 def reference_baum_welch(X, bounds, n_states, *, n_iter, tol, reg_covar, random_state):
-    """EM from the package's k-means start; returns an :class:`skhmmgmr._em.EMResult`."""
+    """EM from the package's k-means start; returns an :class:`skhmmgmr._hmm._em.EMResult`."""
     params = _initial_parameters(X, n_states, reg_covar, check_random_state(random_state))
     # The package's covariance prior: psi = reg_covar * n / K, penalty -psi/2 sum tr(S^-1).
     prior_scale = reg_covar * len(X) / n_states
@@ -155,7 +155,7 @@ class PeerHMMGMR(HMMGMRRegressor):
     def _baum_welch(self, columns, recordings):
         from hmmlearn.hmm import GaussianHMM
 
-        from skhmmgmr._em import initialize_parameters
+        from skhmmgmr._hmm._em import initialize_parameters
 
         start = initialize_parameters(
             columns,

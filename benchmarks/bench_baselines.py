@@ -46,7 +46,8 @@ from sklearn.linear_model import RidgeCV
 
 from skhmmgmr import HMMGMRRegressor, make_torque_pipeline
 from skhmmgmr.datasets import FEATURE_NAMES, make_driving_protocol
-from skhmmgmr.metrics import normalize_performance, recording_metrics
+from skhmmgmr.metrics import normalize_performance
+from skhmmgmr.metrics._table import recording_metrics
 
 FEATURES = list(FEATURE_NAMES)
 LAGS_S = (0.1, 0.25, 0.5, 1.0)

@@ -38,8 +38,8 @@ from _data import thesis_protocol
 from sklearn.exceptions import ConvergenceWarning
 
 from skhmmgmr import HMMGMRRegressor, select_parameters
+from skhmmgmr._core._schema import FEATURE_NAMES, TARGET
 from skhmmgmr.cluster import WORKER_ENVIRONMENT, fit_on_cluster, use_cluster
-from skhmmgmr.datasets._schema import FEATURE_NAMES, TARGET
 
 DEFAULT_CACHE = os.path.join(os.path.expanduser("~"), ".cache", "skhmmgmr-benchmarks")
 TABLES = ["relevance", "candidates", "states", "bic", "test"]

@@ -19,8 +19,8 @@ from _data import make_recordings, standardized_joint
 from hmmlearn.hmm import GaussianHMM
 from threadpoolctl import threadpool_limits
 
-from skhmmgmr._em import baum_welch, initialize_parameters
-from skhmmgmr._sequences import Recordings
+from skhmmgmr._core._sequences import Recordings
+from skhmmgmr._hmm._em import baum_welch, initialize_parameters
 
 CASES = {"3 dims, K=5": (2, 5), "9 dims, K=5": (8, 5), "19 dims, K=2": (18, 2)}
 

@@ -3,7 +3,7 @@
 For every number of columns D, number of states K and recording length, the same data
 (``_data.make_recordings``, standardised) and the same k-means start are given to
 
-- the package's engine (:func:`skhmmgmr._em.baum_welch`),
+- the package's engine (:func:`skhmmgmr._hmm._em.baum_welch`),
 - the fused numba reference (``_fused.py``: one pass per recording, recordings in parallel),
 - hmmlearn's ``GaussianHMM(covariance_type="full")`` (``--hmmlearn``; slow),
 
@@ -33,8 +33,8 @@ from numba import config as numba_config
 from numba import get_num_threads, set_num_threads
 from threadpoolctl import threadpool_limits
 
-from skhmmgmr._em import baum_welch, initialize_parameters
-from skhmmgmr._sequences import Recordings
+from skhmmgmr._core._sequences import Recordings
+from skhmmgmr._hmm._em import baum_welch, initialize_parameters
 
 DIMS = (3, 5, 7, 12, 19)
 STATES = (2, 3, 4, 5, 6, 7, 8, 9, 10, 12, 16, 20)

@@ -39,8 +39,8 @@ from sklearn.exceptions import ConvergenceWarning
 from threadpoolctl import threadpool_limits
 
 from skhmmgmr import HMMGMRRegressor, select_parameters
-from skhmmgmr._score_tables import best_per_recording, rescore_table
-from skhmmgmr.datasets._schema import TARGET
+from skhmmgmr._core._schema import TARGET
+from skhmmgmr._search._score_tables import best_per_recording, rescore_table
 from skhmmgmr.metrics import evaluate_recordings
 
 DEFAULT_CACHE = os.path.join(os.path.expanduser("~"), ".cache", "skhmmgmr-benchmarks")

@@ -1,7 +1,17 @@
 """skhmmgmr: Hidden Markov Model + Gaussian Mixture Regression for scikit-learn."""
 
-from . import cluster, datasets, feature_selection, metrics, selection, state_selection, utils
-from ._fitted import FittedHMMGMR, Standardization
+from . import (
+    _legacy,
+    cluster,
+    datasets,
+    feature_selection,
+    metrics,
+    selection,
+    state_selection,
+    utils,
+)
+from ._core._public import publish
+from ._hmm._fitted import FittedHMMGMR, Standardization
 from ._version import __version__
 from .estimator import HMMGMRRegressor
 from .feature_selection import (
@@ -42,3 +52,6 @@ __all__ = [
     "state_selection",
     "utils",
 ]
+
+publish(globals())
+_legacy.install()

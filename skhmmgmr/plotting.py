@@ -6,6 +6,14 @@ Needs the ``plot`` extra (matplotlib), imported only when a plot is drawn.
 import numpy as np
 import pandas as pd
 
+__all__ = [
+    "driver_table",
+    "plot_driver_comparison",
+    "plot_estimate",
+    "plot_relevance",
+    "plot_state_selection",
+]
+
 
 def _pyplot():
     try:

@@ -33,7 +33,7 @@ The file is one JSON object (format ``"skhmmgmr-hmm-gmr"``, ``format_version`` 1
 ``stale_inputs`` (optional; models fitted with ``missing_values="carry_forward"``)
     ``lags`` (L increasing sample counts) and ``variances`` (F x L, standardised units,
     ``null`` where unknown): every input's variogram, the variance of its value ``lag``
-    samples earlier about its current one (:mod:`skhmmgmr._stale_inputs`).
+    samples earlier about its current one (:mod:`skhmmgmr._hmm._stale_inputs`).
 ``estimator_params``, ``fit_info``
     Hyperparameters (``get_params()``) and, optionally, ``log_likelihood``,
     ``log_likelihood_history``, ``penalized_log_likelihood``,
@@ -61,11 +61,22 @@ from numbers import Integral
 
 import numpy as np
 
-from ._emissions import make_emissions
-from ._fitted import FittedHMMGMR, Standardization
-from ._gaussian import NotPositiveDefiniteError
-from ._stale_inputs import MAX_LAG, StaleInputNoise
+from ._hmm._emissions import make_emissions
+from ._hmm._fitted import FittedHMMGMR, Standardization
+from ._hmm._gaussian import NotPositiveDefiniteError
+from ._hmm._stale_inputs import MAX_LAG, StaleInputNoise
 from ._version import __version__
+
+__all__ = [
+    "FIT_INFO_KEYS",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "PortableModel",
+    "export_json",
+    "load_json",
+    "read_model",
+    "to_dict",
+]
 
 FORMAT_NAME = "skhmmgmr-hmm-gmr"
 FORMAT_VERSION = 1

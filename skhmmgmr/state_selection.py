@@ -25,12 +25,12 @@ from sklearn.base import BaseEstimator, RegressorMixin, clone
 from sklearn.exceptions import NotFittedError
 from sklearn.utils.validation import check_is_fitted
 
-from ._compat import Interval, _fit_context
-from ._docstrings import fill_shared_parameters
-from ._evaluation import evaluate_models
-from ._score_tables import labels_of, relative_gain, rescore_table
-from ._selector_base import RecordingSearchMixin, default_estimator
-from .metrics import trade_offs as all_trade_offs
+from ._core._compat import Interval, _fit_context
+from ._core._docstrings import fill_shared_parameters
+from ._search._evaluation import evaluate_models
+from ._search._score_tables import labels_of, relative_gain, rescore_table
+from ._search.base import RecordingSearchMixin, default_estimator
+from .metrics._scores import trade_offs as all_trade_offs
 
 __all__ = ["StateSelector", "select_n_states", "state_choices"]
 

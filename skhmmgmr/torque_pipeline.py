@@ -30,11 +30,11 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.pipeline import Pipeline
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ._compat import Interval, _fit_context
-from ._docstrings import fill_shared_parameters
-from ._panel import read_row_order
-from ._sequences import as_recordings
-from .estimator import HMMGMRRegressor
+from ._core._compat import Interval, _fit_context
+from ._core._docstrings import fill_shared_parameters
+from ._core._panel import read_row_order
+from ._core._sequences import as_recordings
+from .estimator._regressor import HMMGMRRegressor
 
 __all__ = ["SteeringFeatures", "make_torque_pipeline"]
 

@@ -11,9 +11,9 @@ from numbers import Integral
 import numpy as np
 from sklearn.model_selection import PredefinedSplit
 
-from ._evaluation import check_recording_splits
-from ._selector_base import RecordingSearchMixin
-from .estimator import HMMGMRRegressor
+from ._search._evaluation import check_recording_splits
+from ._search.base import RecordingSearchMixin
+from .estimator._regressor import HMMGMRRegressor
 from .state_selection import StateSelector
 
 __all__ = ["expected_failed_checks"]

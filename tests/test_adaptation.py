@@ -9,8 +9,8 @@ import pytest
 from scipy.stats import multivariate_normal
 
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr._em import baum_welch
-from skhmmgmr._sequences import as_recordings
+from skhmmgmr._core._sequences import as_recordings
+from skhmmgmr._hmm._em import baum_welch
 from skhmmgmr.datasets import shift_target
 
 
@@ -177,7 +177,7 @@ def test_predict_ahead_at_zero_steps_is_predict_and_the_std_is_returned(fitted):
 
 
 def test_transition_power_equals_a_plain_loop_and_stays_stochastic():
-    from skhmmgmr._adaptation import transition_power
+    from skhmmgmr.estimator._adaptation import transition_power
 
     rng = np.random.default_rng(0)
     transmat = rng.dirichlet(np.ones(4), size=4)

@@ -220,7 +220,7 @@ def test_select_reports_an_empty_candidate(tmp_path, capsys, monkeypatch):
         candidates.loc[row, ["n_features", "empty"]] = [0, True]
         return candidates
 
-    monkeypatch.setattr(skhmmgmr.selection, "candidate_subsets", with_empty_strict_2)
+    monkeypatch.setattr(skhmmgmr.selection._framework, "candidate_subsets", with_empty_strict_2)
     path = tmp_path / "runs.csv"
     make_recordings().to_csv(path, index=False)
     output = tmp_path / "out"

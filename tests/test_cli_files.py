@@ -9,8 +9,8 @@ import pandas as pd
 import pytest
 from test_cli import make_recordings
 
-from skhmmgmr._cli_files import CommandError, read_data, write_output
 from skhmmgmr.cli import main
+from skhmmgmr.cli._files import CommandError, read_data, write_output
 
 DATA = ["--target", "torque", "--recording", "run", "--time", "t"]
 FIT = ["--features", "f0", "f1", "--n-states", "2", "--quiet"]
@@ -204,9 +204,9 @@ def test_a_missing_or_unusable_output_folder_is_named(tmp_path, runs, model, cap
 
 
 def test_an_unwritable_output_folder_is_named(tmp_path, runs, capsys, monkeypatch):
-    import skhmmgmr._cli_files
+    import skhmmgmr.cli._files
 
-    monkeypatch.setattr(skhmmgmr._cli_files.os, "access", lambda *args: False)
+    monkeypatch.setattr(skhmmgmr.cli._files.os, "access", lambda *args: False)
     assert main(["fit", str(runs), *DATA, *FIT, "--output", str(tmp_path / "m.json")]) == 2
     assert f"the folder {tmp_path} is not writable" in _error(capsys)
 

@@ -19,8 +19,9 @@ import pytest
 from _protocol_data import PERIOD, make_protocol
 from sklearn.model_selection import PredefinedSplit
 
-from skhmmgmr import HMMGMRRegressor, _cluster_search, _evaluation
-from skhmmgmr.cluster import WORKER_ENVIRONMENT, fit_on_cluster, use_cluster
+from skhmmgmr import HMMGMRRegressor
+from skhmmgmr._search import _evaluation
+from skhmmgmr.cluster import WORKER_ENVIRONMENT, _scatter, fit_on_cluster, use_cluster
 from skhmmgmr.feature_selection import ExhaustiveFeatureSelector
 from skhmmgmr.selection import select_parameters
 
@@ -54,7 +55,7 @@ def cluster():
         env=WORKER_ENVIRONMENT,
     ) as cluster:
         yield cluster
-    _cluster_search.release_scattered()
+    _scatter.release_scattered()
 
 
 @pytest.fixture(scope="module")
@@ -290,7 +291,7 @@ def test_select_command_on_a_scheduler_writes_the_local_tables(cluster, tmp_path
 def test_a_parquet_file_that_changed_is_read_again(cluster, fit_data, tmp_path):
     """Load tasks were keyed by path: while a task of the old contents was alive (another
     fit, a future still held), a fit after the file changed was served the old rows."""
-    from skhmmgmr.cluster import _partitions
+    from skhmmgmr.cluster._dask import _partitions
 
     features = ["f0", "f1"]
     params = dict(n_states=2, random_state=0, tol=1e-8, n_iter=50)

@@ -1,14 +1,36 @@
-"""The architecture page names every module of the package, and only modules that exist."""
+"""The architecture page: its sections are the package's subpackages, in the order of the layers.
+
+Every module of the package is named on the page, in the section of the top-level entry (a
+subpackage or a module of ``skhmmgmr/``) that holds it; every entry has its section; the
+sections come in the order of ``tests/test_package_layers.py``'s layers, lowest first.
+"""
 
 import re
 from pathlib import Path
 
+from test_package_layers import RANK
+
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "architecture.rst"
+MODULE = re.compile(r"``(skhmmgmr/[\w/]+\.py)``")
+HEADING = re.compile(r"^``skhmmgmr/(\w+)(?:/|\.py)``: .+\n-+$", re.MULTILINE)
 
 
 def named_modules():
-    return set(re.findall(r"``(skhmmgmr/[\w/]+\.py)``", PAGE.read_text()))
+    return set(MODULE.findall(PAGE.read_text()))
+
+
+def sections():
+    """(entry, text) of every section headed by a top-level entry of the package."""
+    text = PAGE.read_text()
+    found = list(HEADING.finditer(text))
+    ends = [m.start() for m in found[1:]] + [text.find("\nWhere to add")]
+    return [(m.group(1), text[m.end() : end]) for m, end in zip(found, ends, strict=True)]
+
+
+def _entry_of(module_path):
+    parts = Path(module_path).relative_to("skhmmgmr").with_suffix("").parts
+    return parts[0]
 
 
 def test_every_module_named_on_the_architecture_page_exists():
@@ -20,6 +42,18 @@ def test_every_module_of_the_package_is_on_the_architecture_page():
     modules = {str(p.relative_to(ROOT)) for p in (ROOT / "skhmmgmr").rglob("*.py")}
     unnamed = sorted(modules - named_modules())
     assert not unnamed, f"docs/architecture.rst does not say what these modules do: {unnamed}"
+
+
+def test_the_sections_are_the_subpackages_in_the_order_of_the_layers():
+    entries = [entry for entry, _ in sections()]
+    # _version and _legacy are on the ground floor and said in _core's section
+    assert set(entries) == set(RANK) - {"_version", "_legacy", "__main__"}
+    ranks = [RANK[entry] for entry in entries]
+    assert ranks == sorted(ranks), f"sections out of the layers' order: {entries}"
+    for entry, text in sections():
+        for module in MODULE.findall(text):
+            if _entry_of(module) not in {"_version", "_legacy", "__main__"}:
+                assert _entry_of(module) == entry, f"{module} is named in the {entry} section"
 
 
 def test_the_page_is_in_the_docs_table_of_contents():

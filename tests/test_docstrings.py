@@ -6,7 +6,7 @@ import pytest
 
 import skhmmgmr
 from skhmmgmr import feature_selection, metrics, selection, state_selection
-from skhmmgmr._docstrings import SHARED_GROUPS, SHARED_PARAMETERS, fill_shared_parameters
+from skhmmgmr._core._docstrings import SHARED_GROUPS, SHARED_PARAMETERS, fill_shared_parameters
 
 # A parameter that only shares its name with a shared one, and what it means there instead.
 SAME_NAME_OTHER_MEANING = {

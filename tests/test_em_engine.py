@@ -5,15 +5,16 @@ import pytest
 from scipy.special import logsumexp
 from scipy.stats import multivariate_normal
 
-from skhmmgmr import _em, _kernels
-from skhmmgmr._em import (
+from skhmmgmr._core._sequences import Recordings
+from skhmmgmr._hmm import _em, _kernels
+from skhmmgmr._hmm._em import (
     HMMParameters,
     e_step,
     initialize_parameters,
 )
-from skhmmgmr._em_data import Columns, EStepData, recording_blocks
-from skhmmgmr._emissions import FullCovariance
-from skhmmgmr._gaussian import (
+from skhmmgmr._hmm._em_data import Columns, EStepData, recording_blocks
+from skhmmgmr._hmm._emissions import FullCovariance
+from skhmmgmr._hmm._gaussian import (
     PAIR_BUFFER_VALUES,
     MomentSums,
     augmented_columns,
@@ -23,20 +24,19 @@ from skhmmgmr._gaussian import (
     stack_gaussians,
     weighted_moments,
 )
-from skhmmgmr._gmr import (
+from skhmmgmr._hmm._gmr import (
     condition_on_inputs,
     conditional_means,
     filter_state_probabilities,
     mix_estimates,
 )
-from skhmmgmr._kernels import (
+from skhmmgmr._hmm._kernels import (
     RESCALE_BELOW,
     UNDERFLOW,
     VECTORISED_STATES,
     forward,
     scaled_densities,
 )
-from skhmmgmr._sequences import Recordings
 
 
 def random_gaussians(rng, n_states, n_features):

@@ -7,7 +7,7 @@ import pytest
 from sklearn.cluster import KMeans
 from threadpoolctl import threadpool_limits
 
-from skhmmgmr._em_init import _kmeans_centers
+from skhmmgmr._hmm._em_init import _kmeans_centers
 
 
 def sklearn_centers(sample, n_states, random_state):
@@ -58,7 +58,7 @@ def test_an_emptied_cluster_is_left_to_sklearn_from_the_same_draws():
 
 
 def test_nearest_indicators_pick_the_nearest_centre_first_on_ties():
-    from skhmmgmr._em_init import _nearest_indicators
+    from skhmmgmr._hmm._em_init import _nearest_indicators
 
     rng = np.random.default_rng(2)
     centers = rng.normal(size=(4, 3))
@@ -77,9 +77,9 @@ def test_nearest_indicators_pick_the_nearest_centre_first_on_ties():
 
 @pytest.mark.parametrize("init_params", ["kmeans", "random"])
 def test_initial_moments_give_the_engine_its_totals(init_params):
-    from skhmmgmr._em import initialize_parameters
-    from skhmmgmr._em_data import EStepData
-    from skhmmgmr._sequences import as_recordings
+    from skhmmgmr._core._sequences import as_recordings
+    from skhmmgmr._hmm._em import initialize_parameters
+    from skhmmgmr._hmm._em_data import EStepData
 
     rng = np.random.default_rng(4)
     X = blobs(rng, 3, 4, 3_000)

@@ -15,10 +15,15 @@ import pytest
 from scipy.stats import multivariate_normal
 
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr._em import HMMParameters, Statistics, fit_hmm, m_step
-from skhmmgmr._emissions import CovariancePrior, FullCovariance, MomentStatistics, TiedCovariance
-from skhmmgmr._gaussian import weighted_moments
-from skhmmgmr._sequences import as_recordings
+from skhmmgmr._core._sequences import as_recordings
+from skhmmgmr._hmm._em import HMMParameters, Statistics, fit_hmm, m_step
+from skhmmgmr._hmm._emissions import (
+    CovariancePrior,
+    FullCovariance,
+    MomentStatistics,
+    TiedCovariance,
+)
+from skhmmgmr._hmm._gaussian import weighted_moments
 from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping
 
 

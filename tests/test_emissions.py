@@ -9,17 +9,17 @@ from scipy.special import logsumexp
 from scipy.stats import multivariate_normal
 
 from skhmmgmr import FittedHMMGMR, HMMGMRRegressor
-from skhmmgmr._em import HMMParameters, baum_welch
-from skhmmgmr._emissions import (
+from skhmmgmr._core._sequences import as_recordings
+from skhmmgmr._hmm._em import HMMParameters, baum_welch
+from skhmmgmr._hmm._emissions import (
     CovariancePrior,
     FullCovariance,
     MomentStatistics,
     TiedCovariance,
     emission_family,
 )
-from skhmmgmr._gaussian import weighted_moments
-from skhmmgmr._kernels import UNDERFLOW
-from skhmmgmr._sequences import as_recordings
+from skhmmgmr._hmm._gaussian import weighted_moments
+from skhmmgmr._hmm._kernels import UNDERFLOW
 
 FAMILIES = {"full": FullCovariance, "tied": TiedCovariance}
 

@@ -8,8 +8,8 @@ from hmmlearn.hmm import GaussianHMM
 from scipy.stats import multivariate_normal
 
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr._em import HMMParameters, fit_hmm
-from skhmmgmr._sequences import as_recordings
+from skhmmgmr._core._sequences import as_recordings
+from skhmmgmr._hmm._em import HMMParameters, fit_hmm
 
 
 def make_switching_data(n_recordings=3, length=150, seed=0):

@@ -22,15 +22,16 @@ from sklearn.model_selection import GroupKFold, PredefinedSplit
 from sklearn.pipeline import make_pipeline
 from threadpoolctl import threadpool_limits
 
-from skhmmgmr import HMMGMRRegressor, StateSelector, _evaluation
-from skhmmgmr._evaluation import shared_evaluations
-from skhmmgmr._forward_paths import ForwardPath
+from skhmmgmr import HMMGMRRegressor, StateSelector
+from skhmmgmr._search import _evaluation
+from skhmmgmr._search._evaluation import shared_evaluations
 from skhmmgmr.feature_selection import (
     ExhaustiveFeatureSelector,
     ForwardFeatureSelector,
     SpearmanSelector,
     spearman_relevance,
 )
+from skhmmgmr.feature_selection._forward_paths import ForwardPath
 from skhmmgmr.metrics import PerformanceScore, performance_score
 from skhmmgmr.selection import compare_subsets, select_parameters
 
@@ -293,7 +294,7 @@ def test_interrupted_parallel_search_leaves_no_folder_or_worker(data, tmp_path, 
 KILLED_RUN = """
 import os, signal
 import joblib, numpy as np
-from skhmmgmr import _evaluation
+from skhmmgmr._search import _evaluation
 from skhmmgmr.feature_selection import ExhaustiveFeatureSelector
 
 def die(results, **kwargs):
@@ -471,7 +472,7 @@ def test_shared_evaluations_reuse_subsets_across_steps_with_the_same_results(dat
 
 
 def test_models_are_fitted_longest_first_and_reported_in_their_order(data, monkeypatch):
-    from skhmmgmr import _evaluation
+    from skhmmgmr._search import _evaluation
 
     X, y, groups, cv = data
     X = X.to_numpy()

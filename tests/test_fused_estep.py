@@ -1,4 +1,4 @@
-"""The fused E-step (``skhmmgmr/_fused_estep.py``) computes what the staged E-step computes.
+"""The fused E-step (``skhmmgmr/_hmm/_fused_estep.py``) computes what the staged E-step computes.
 
 The staged path (densities by BLAS, the recursions of ``_kernels``, moments by
 ``MomentSums``) is the expectation: it is what the engine runs for rows with missing values,
@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from skhmmgmr import _em, _fused_estep
-from skhmmgmr._em import HMMParameters, baum_welch, e_step, initialize_parameters, score_hmm
-from skhmmgmr._em_data import EStepData
-from skhmmgmr._fused_estep import applies, fused_pass
-from skhmmgmr._sequences import Recordings
+from skhmmgmr._core._sequences import Recordings
+from skhmmgmr._hmm import _em, _fused_estep
+from skhmmgmr._hmm._em import HMMParameters, baum_welch, e_step, initialize_parameters, score_hmm
+from skhmmgmr._hmm._em_data import EStepData
+from skhmmgmr._hmm._fused_estep import applies, fused_pass
 
 
 def _data(n_dims, n_states, covariance_type="full", seed=0):

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from skhmmgmr._em import baum_welch, initialize_parameters
-from skhmmgmr._sequences import Recordings
+from skhmmgmr._core._sequences import Recordings
+from skhmmgmr._hmm._em import baum_welch, initialize_parameters
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 

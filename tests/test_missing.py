@@ -8,9 +8,9 @@ import pytest
 from scipy.stats import multivariate_normal
 
 from skhmmgmr import FilterStream, HMMGMRRegressor
-from skhmmgmr._em import HMMParameters, e_step, fit_hmm
-from skhmmgmr._em_data import Columns, EStepData
-from skhmmgmr._sequences import Recordings
+from skhmmgmr._core._sequences import Recordings
+from skhmmgmr._hmm._em import HMMParameters, e_step, fit_hmm
+from skhmmgmr._hmm._em_data import Columns, EStepData
 
 
 def recordings_of(lengths):

@@ -2,13 +2,15 @@
 
 Two rules, checked by walking the abstract syntax tree of every module of the package:
 
-- scikit-learn's private API (a ``_``-prefixed module or name) is imported by ``_compat.py``
-  only, so a change in a scikit-learn release is dealt with in one place;
+- scikit-learn's private API (a ``_``-prefixed module or name) is imported by
+  ``_core/_compat.py`` only, so a change in a scikit-learn release is dealt with in one place;
 - no module reads another module's private state: an attribute access ``obj._name`` or an import
   ``from .module import _name`` is allowed only in the module that defines ``_name`` (a name a
-  module imports counts as defined there, so ``_compat.py`` lends scikit-learn's names), or, for
-  ``self._name``, in a subclass of a class whose module defines it (a protected hook, as
+  module imports counts as defined there, so ``_core/_compat.py`` lends scikit-learn's names),
+  or, for ``self._name``, in a subclass of a class whose module defines it (a protected hook, as
   scikit-learn's ``_validate_params`` is to its estimators).
+
+Which layer may import which is ``tests/test_package_layers.py``'s rule.
 """
 
 import ast
@@ -18,14 +20,14 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "skhmmgmr"
-COMPAT = PACKAGE / "_compat.py"
+COMPAT = PACKAGE / "_core" / "_compat.py"
 
 # (module, private name) pairs that truly must cross a module boundary, each with its reason.
 ALLOWED_PRIVATE_ACCESS: set[tuple[str, str]] = {
     # The estimator's model I/O mixin builds a fitted estimator without fit (from a JSON file,
     # an hmmlearn model or a FittedHMMGMR) and checks its parameters against the estimator
     # class's own constraints, as fit does: scikit-learn's convention for them is this name.
-    ("_estimator_io.py", "_parameter_constraints"),
+    ("_io.py", "_parameter_constraints"),
 }
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from skhmmgmr._panel import has_recording_index, read_row_order
+from skhmmgmr._core._panel import has_recording_index, read_row_order
 
 
 def panel(recordings, times, values=None):

@@ -113,7 +113,7 @@ def test_skops_round_trip_with_trusted_types(fitted, frame, tmp_path):
     untrusted = sio.get_untrusted_types(file=path)
     # the estimator and the parts of its fitted model, nothing from outside the package
     assert "skhmmgmr.estimator.HMMGMRRegressor" in untrusted
-    assert "skhmmgmr._fitted.FittedHMMGMR" in untrusted
+    assert "skhmmgmr.FittedHMMGMR" in untrusted
     assert all(name.startswith("skhmmgmr.") for name in untrusted), untrusted
     loaded = sio.load(path, trusted=untrusted)
     _assert_same_model(fitted, loaded, X, groups)

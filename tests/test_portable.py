@@ -279,7 +279,7 @@ def test_restored_model_streams(data, exported):
 def consistent_file(model, covariances, path):
     """A model file whose joint covariances are ``covariances`` (data units) and whose filter
     block is derived from them, as a writer that does not check them would produce."""
-    from skhmmgmr._emissions import make_emissions
+    from skhmmgmr._hmm._emissions import make_emissions
     from skhmmgmr.portable import export_json, to_dict
 
     fitted = model.model_

@@ -7,8 +7,8 @@ import stat
 import pandas as pd
 import pytest
 
-from skhmmgmr._report import render_html, write_report
 from skhmmgmr.cli import main
+from skhmmgmr.cli._report import render_html, write_report
 
 plt = pytest.importorskip("matplotlib.pyplot")
 

@@ -12,10 +12,10 @@ from scipy import stats
 from sklearn.model_selection import PredefinedSplit
 
 import skhmmgmr.selection
-from skhmmgmr._anova import accuracy_led, framework_anova
-from skhmmgmr._report import report_tables, write_report
+from skhmmgmr.cli._report import report_tables, write_report
 from skhmmgmr.metrics import trade_offs
 from skhmmgmr.selection import candidate_subsets, compare_subsets, select_parameters
+from skhmmgmr.selection._anova import accuracy_led, framework_anova
 
 # Thesis Table A.2 ("Selection strategies"): feature relevance counts at the chosen 50/50
 # trade-off over the 42 validation recordings (Table E.2 lists them), for the exhaustive
@@ -144,7 +144,7 @@ def with_empty_candidate(monkeypatch, name="Strict 2"):
         candidates.loc[row, ["n_features", "empty"]] = [0, True]
         return candidates
 
-    monkeypatch.setattr(skhmmgmr.selection, "candidate_subsets", patched)
+    monkeypatch.setattr(skhmmgmr.selection._framework, "candidate_subsets", patched)
 
 
 def test_empty_candidate_is_warned_and_reported(protocol, monkeypatch, tmp_path):

@@ -7,6 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from skhmmgmr._core._schema import META_COLUMNS
 from skhmmgmr.datasets import (
     CALIBRATION_BANDS,
     DRIVER_STYLES,
@@ -29,7 +30,6 @@ from skhmmgmr.datasets._road import (
     make_road,
     step_curvature,
 )
-from skhmmgmr.datasets._schema import META_COLUMNS
 
 SPEED = 100.0 / 3.6
 

@@ -13,9 +13,9 @@ from scipy.stats import multivariate_normal
 from test_missing import random_parameters, switching_data, with_gaps
 
 from skhmmgmr import FilterStream, FittedHMMGMR, HMMGMRRegressor
-from skhmmgmr._emissions import make_emissions
-from skhmmgmr._missing import condition_rows
-from skhmmgmr._stale_inputs import StaleInputNoise, last_observed
+from skhmmgmr._hmm._emissions import make_emissions
+from skhmmgmr._hmm._missing import condition_rows
+from skhmmgmr._hmm._stale_inputs import StaleInputNoise, last_observed
 
 # -- plain-loop references -----------------------------------------------------------------
 

@@ -17,8 +17,8 @@ from skhmmgmr import (
     SteeringFeatures,
     make_torque_pipeline,
 )
-from skhmmgmr._em import PROBABILITY_FLOOR, HMMParameters, Statistics, m_step
-from skhmmgmr._emissions import CovariancePrior, MomentStatistics
+from skhmmgmr._hmm._em import PROBABILITY_FLOOR, HMMParameters, Statistics, m_step
+from skhmmgmr._hmm._emissions import CovariancePrior, MomentStatistics
 from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping
 from skhmmgmr.metrics import make_performance_scorers
 

@@ -1,6 +1,17 @@
 """Driving data: an embedded lane-keeping simulator and loaders for public and own recordings."""
 
-from .._panel import to_panel
+from .._core._panel import to_panel
+from .._core._public import publish
+from .._core._schema import (
+    DRIVER,
+    FEATURE_NAMES,
+    FEATURE_UNITS,
+    RECORDING,
+    SETTING,
+    SPLIT,
+    TARGET,
+    TIME,
+)
 from ._base import clear_data_home, get_data_home
 from ._calibration import CALIBRATION_BANDS, THESIS_TABLE_C2, calibration_table
 from ._comma2k19 import load_comma2k19_segment
@@ -11,16 +22,6 @@ from ._fetch import COMMA2K19_URL, fetch_comma2k19
 from ._protocol import make_driving_protocol
 from ._recordings import load_recordings
 from ._resample import resample_recordings
-from ._schema import (
-    DRIVER,
-    FEATURE_NAMES,
-    FEATURE_UNITS,
-    RECORDING,
-    SETTING,
-    SPLIT,
-    TARGET,
-    TIME,
-)
 from ._shift import shift_target
 from ._simulator import make_lane_keeping
 
@@ -52,3 +53,5 @@ __all__ = [
     "TARGET",
     "TIME",
 ]
+
+publish(globals())

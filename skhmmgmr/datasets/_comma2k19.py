@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import savgol_filter
 
+from .._core._schema import DRIVER, RECORDING, TARGET, TIME
 from ._comma2k19_can import can_decoder
 from ._frame import check_rate, tidy_frame
-from ._schema import DRIVER, RECORDING, TARGET, TIME
 
 BUS = 0
 # The panda marks the frames the comma device sent (openpilot's commands) with bit 7 of the bus.

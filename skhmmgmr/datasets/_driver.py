@@ -32,7 +32,16 @@ from scipy.signal import lfilter
 
 @dataclass(frozen=True)
 class DriverParameters:
-    """Parameters of a virtual driver (SI units; see the module docstring for their role)."""
+    """Parameters of a virtual driver of :func:`make_lane_keeping` (``driver=``), in SI units.
+
+    The named styles are :data:`DRIVER_STYLES`; a variant of one is
+    ``dataclasses.replace(DRIVER_STYLES["defensive"], reaction_time=0.3)``. The fields follow the
+    thesis' driver model (Appendix C.1, Table C.1): a visual layer (reaction, preview and lead
+    times, near-point gain, tolerated deviation, corner cutting, the driver's internal model of
+    the vehicle), a neuromuscular layer (arm stiffness, damping and inertia, muscle activation
+    lag, intermittent updates) and remnants (coloured noise on the angle and the torque, lane
+    wander), and ``variability``, the spread of every parameter between recordings.
+    """
 
     reaction_time: float  # [s] perception-to-action delay of the visual layer
     preview_time: float  # [s] far point time ahead (distance = speed * time)

@@ -11,7 +11,7 @@ strictly increase. :func:`time_order` puts rows in the order :func:`tidy_frame` 
 import numpy as np
 import pandas as pd
 
-from ._schema import (
+from .._core._schema import (
     DRIVER,
     FEATURE_UNITS,
     META_COLUMNS,

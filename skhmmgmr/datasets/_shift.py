@@ -3,8 +3,8 @@
 import numpy as np
 import pandas as pd
 
-from .._panel import read_row_order
-from .._sequences import as_recordings
+from .._core._panel import read_row_order
+from .._core._sequences import as_recordings
 
 
 def shift_target(y, horizon_rows, groups=None):

@@ -7,10 +7,10 @@ import os
 import numpy as np
 from sklearn.utils import check_random_state
 
+from .._core._schema import DRIVER, FEATURE_NAMES, RECORDING, SETTING, SPLIT, TARGET, TIME
 from ._driver import check_driver, coloured_noise, sample_driver
 from ._frame import tidy_frame
 from ._road import SETTINGS, make_road, manoeuvre_offsets
-from ._schema import DRIVER, FEATURE_NAMES, RECORDING, SETTING, SPLIT, TARGET, TIME
 from ._sensors import check_sensor_noise, measure
 from ._vehicle import VehicleParameters
 

@@ -1,0 +1,26 @@
+"""Command line: ``skhmmgmr demo | select | report | fit | predict`` (``python -m skhmmgmr``)."""
+
+from .._core._public import publish
+from ._commands import (
+    DEMO_SCALES,
+    build_parser,
+    command_demo,
+    command_fit,
+    command_predict,
+    command_report,
+    command_select,
+    main,
+)
+
+__all__ = [
+    "DEMO_SCALES",
+    "build_parser",
+    "command_demo",
+    "command_fit",
+    "command_predict",
+    "command_report",
+    "command_select",
+    "main",
+]
+
+publish(globals())

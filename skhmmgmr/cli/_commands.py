@@ -1,0 +1,514 @@
+"""Command line: ``skhmmgmr demo | select | report | fit | predict`` (``python -m skhmmgmr``).
+
+Errors the user can fix (a missing file or column, unreadable data, an output that would
+overwrite a file) are printed without a traceback and end with exit code 2. Reading inputs and
+guarding outputs is :mod:`._files`' job.
+"""
+
+import argparse
+import inspect
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+
+from .._core._schema import META_COLUMNS
+from ..datasets import RECORDING, SPLIT, TARGET, TIME
+from ._cluster import add_scheduler_option, scheduler_context
+from ._files import (
+    NO_TIME,
+    CommandError,
+    assign_splits,
+    check_columns,
+    check_output,
+    check_time_column,
+    in_time_order,
+    load_model,
+    read_data,
+    write_output,
+)
+
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Every option's help ends with its default, unless it states it (as options whose
+    default is None, decided at run time, do)."""
+
+    def _get_help_string(self, action):
+        if action.default is None or "(default" in (action.help or ""):
+            return action.help
+        return super()._get_help_string(action)
+
+
+def _framework_defaults():
+    """Defaults of :func:`~skhmmgmr.select_parameters`: ``select`` uses and shows them."""
+    from ..selection import select_parameters
+
+    parameters = inspect.signature(select_parameters).parameters
+    return {name: parameter.default for name, parameter in parameters.items()}
+
+
+def _log(args, message):
+    if not getattr(args, "quiet", False):
+        print(message, flush=True)
+
+
+def _feature_columns(frame, args):
+    if args.features:
+        return list(args.features)
+    excluded = {args.target, args.recording, args.time, TIME, *META_COLUMNS}
+    return [
+        c for c in frame.columns if c not in excluded and pd.api.types.is_numeric_dtype(frame[c])
+    ]
+
+
+DEMO_SCALES = {
+    # section length [s], features kept by the filter, largest K, trade-off step [%]
+    "default": dict(duration=20.0, n_top=6, k_max=8, trade_off_step=25),
+    "full": dict(duration=300.0, n_top=10, k_max=20, trade_off_step=10),
+}
+
+
+def _demo_default(name):
+    default, full = DEMO_SCALES["default"][name], DEMO_SCALES["full"][name]
+    return f"(default: {default:g}; --full: {full:g})"
+
+
+def _progress(args, total, desc):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc, disable=getattr(args, "quiet", False), leave=False)
+
+
+def _per_driver(test, drivers):
+    table = test.assign(driver=test["recording"].map(drivers).fillna("unknown"))
+    return (
+        table.groupby(["driver", "model"], sort=False)[["rmse", "accuracy", "smoothness"]]
+        .mean()
+        .reset_index()
+    )
+
+
+def _run_framework(args, data, meta):
+    """select_parameters + figures + report folder; shared by ``demo`` and ``select``."""
+    from ..metrics import trade_offs
+    from ..selection import select_parameters
+    from ._report import report_figures, report_tables, versions, write_report
+
+    try:
+        relevance_trade_offs = trade_offs(args.trade_off_step)
+    except ValueError as exc:
+        raise CommandError(f"--trade-off-step: {exc}") from exc
+    period = float(data.groupby(RECORDING)[TIME].diff().median())
+    started = time.perf_counter()
+    bar = _progress(args, 3, "skhmmgmr")
+    bar.set_postfix_str("parameter selection")
+    try:
+        with scheduler_context(args):
+            report = select_parameters(
+                data,
+                candidate_features=args.features,
+                n_top=args.n_top,
+                k_max=args.k_max,
+                trade_off=args.trade_off,
+                relevance_trade_offs=relevance_trade_offs,
+                sampling_period=period,
+                n_jobs=args.n_jobs,
+                progress=not args.quiet,
+                random_state=args.seed,
+            )
+    except ValueError as exc:
+        raise CommandError(str(exc)) from exc
+    bar.update()
+    bar.set_postfix_str("figures")
+    per_driver = _per_driver(report.test, dict(zip(data[RECORDING], data["driver"], strict=False)))
+    figures = report_figures(report, data, sampling_period=period)
+    bar.update()
+    bar.set_postfix_str("report")
+    timings = {**meta.pop("timings", {}), **report.timings}
+    timings["total"] = (
+        sum(timings.values()) + time.perf_counter() - started - sum(report.timings.values())
+    )
+    details = {
+        **meta.pop("details", {}),
+        "selected features": ", ".join(report.features),
+        "selected number of states K": report.n_states,
+        "trade-off": report.trade_off,
+        "filter / K range": f"top {args.n_top} features, K = 1..{args.k_max}",
+        "relevance trade-offs": ", ".join(relevance_trade_offs),
+        "empty candidate subsets": ", ".join(report.empty_candidates) or "none",
+        "seed": args.seed,
+        "n_jobs": args.n_jobs,
+        "scheduler": args.scheduler or "joblib on this machine",
+        **{f"time: {k} [s]": f"{v:.1f}" for k, v in timings.items()},
+    }
+    try:
+        page = write_report(
+            args.output,
+            tables=report_tables(report, per_driver),
+            figures=figures,
+            meta={**meta, "details": details, "timings": timings, "versions": versions()},
+            overwrite=args.overwrite,
+        )
+    except (ValueError, OSError) as exc:
+        raise CommandError(f"cannot write the report {args.output}: {exc}") from exc
+    bar.update()
+    bar.close()
+    columns = ["rmse", "accuracy", "smoothness", "performance_score", "n_features", "n_states"]
+    print(f"selected features: {', '.join(report.features)}; K = {report.n_states}")
+    if report.empty_candidates:
+        print(f"empty candidate subsets (not compared): {', '.join(report.empty_candidates)}")
+    print(report.test_summary.set_index("model")[columns].round(3).to_string())
+    print(per_driver.set_index(["driver", "model"]).round(3).to_string())
+    _log(args, f"Wrote {page} ({timings['total']:.1f} s)")
+    return 0
+
+
+def command_demo(args):
+    """Simulate several drivers, run the whole framework, compare with the baseline on test."""
+    from ..datasets import make_driving_protocol
+
+    check_output(args.output, overwrite=args.overwrite, report=True)
+    scale = DEMO_SCALES["full" if args.full else "default"]
+    for name, value in scale.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
+    _log(
+        args,
+        f"Simulating drivers {', '.join(args.drivers)}: 12 training, 6 validation and 6 test "
+        f"sections of {args.duration:.0f} s at {args.sampling_rate:g} Hz each",
+    )
+    started = time.perf_counter()
+    bar = _progress(args, 1, "simulation")
+    try:
+        data = make_driving_protocol(
+            drivers=tuple(args.drivers),
+            duration=args.duration,
+            sampling_rate=args.sampling_rate,
+            random_state=args.seed,
+            n_jobs=args.n_jobs,
+        )
+    except ValueError as exc:
+        raise CommandError(str(exc)) from exc
+    bar.update()
+    bar.close()
+    text = [
+        "skhmmgmr demo: the thesis' driving protocol simulated for the virtual drivers "
+        f"{', '.join(args.drivers)} (12 training sections on settings 1-6, 6 validation and 6 "
+        f"test sections on setting 7, {args.duration:.0f} s each at {args.sampling_rate:g} Hz, "
+        "100 km/h). The parameter selection framework (Spearman filter, exhaustive and "
+        "forward wrappers, feature relevance, Strict/Mild/Liberal candidates, state selection "
+        "with the 1% rule) chose the feature subset and K on the validation sections; the "
+        "final model and the all-feature baseline with the same K were trained on the "
+        "training sections and compared on the test sections.",
+    ]
+    details = {
+        "drivers": ", ".join(args.drivers),
+        "scale": "thesis (--full)" if args.full else "reduced (default)",
+        "section length [s]": args.duration,
+        "sampling rate [Hz]": args.sampling_rate,
+        "recordings": data[RECORDING].nunique(),
+    }
+    meta = {
+        "title": "skhmmgmr demo: driver steering-torque models",
+        "command": "demo",
+        "text": text,
+        "details": details,
+        "timings": {"simulation": time.perf_counter() - started},
+    }
+    return _run_framework(args, data, meta)
+
+
+def command_select(args):
+    """The framework on the user's recordings."""
+    from ..datasets import load_recordings
+
+    path = Path(args.data)
+    if not path.exists():
+        raise CommandError(f"data file not found: {path}")
+    check_output(args.output, overwrite=args.overwrite, inputs=[path], report=True)
+    source = path
+    if path.is_file():
+        source = read_data(path, args.recording, args.split)
+        check_columns(source, [args.recording, args.target], path)
+        check_time_column(source, args.time, path, file_order=False)
+        if args.split in source.columns and args.split != SPLIT:
+            source = source.drop(columns=SPLIT, errors="ignore").rename(columns={args.split: SPLIT})
+        if args.features:
+            check_columns(source, args.features, path)
+    try:
+        data = load_recordings(
+            source,
+            recording=args.recording,
+            time=args.time,
+            target=args.target,
+            features=args.features,
+            sampling_rate=args.sampling_rate,
+            max_gap=args.max_gap,
+        )
+    except ValueError as exc:
+        raise CommandError(f"{path}: {exc}") from exc
+    splits = set(data[SPLIT])
+    if splits <= {"train", "validation", "test"} and len(splits) == 3:
+        rule = f"the '{args.split}' column"
+    elif splits == {"unknown"}:
+        data[SPLIT] = assign_splits(data, args)
+        rule = (
+            f"recordings drawn at random (seed {args.seed}): {args.validation_fraction:.0%} "
+            f"validation, {args.test_fraction:.0%} test, the rest training"
+        )
+    else:
+        raise CommandError(
+            f"{path}: the '{args.split}' column must hold 'train', 'validation' and 'test' "
+            f"(found {sorted(map(str, splits))}); drop it to split by recording"
+        )
+    counts = data.groupby(SPLIT)[RECORDING].nunique().to_dict()
+    meta = {
+        "title": f"skhmmgmr select: {path.name}",
+        "command": "select",
+        "text": [
+            f"skhmmgmr select on {path}: the parameter selection framework on the user's "
+            f"recordings, target '{args.target}', split by {rule}."
+        ],
+        "details": {
+            "data": str(path),
+            "recordings (train/validation/test)": "/".join(
+                str(counts.get(s, 0)) for s in ("train", "validation", "test")
+            ),
+            "split": rule,
+        },
+    }
+    return _run_framework(args, data, meta)
+
+
+def command_report(args):
+    from ._report import render_html
+
+    try:
+        page = render_html(args.result_dir)
+    except (ValueError, OSError) as exc:
+        raise CommandError(str(exc)) from exc
+    _log(args, f"Wrote {page}")
+    return 0
+
+
+def _ordered_data(args):
+    """The data of ``fit``/``predict``, rows gathered by recording and sorted by time (in file
+    order with ``--time none``)."""
+    frame = read_data(args.data, args.recording)
+    check_columns(frame, [args.recording], args.data)
+    check_time_column(frame, args.time, args.data, file_order=True)
+    time = None if args.time == NO_TIME else args.time
+    if time is None:
+        _log(args, f"--time {NO_TIME}: the rows of {args.data} are taken in file order")
+    return in_time_order(frame, args.data, recording=args.recording, time=time)
+
+
+def command_fit(args):
+    from ..estimator import HMMGMRRegressor
+
+    check_output(args.output, overwrite=args.overwrite, inputs=[args.data])
+    frame = _ordered_data(args)
+    check_columns(frame, [args.target], args.data)
+    features = _feature_columns(frame, args)
+    check_columns(frame, features, args.data)
+    model = HMMGMRRegressor(n_states=args.n_states, random_state=args.seed, n_init=args.n_init)
+    try:
+        model.fit(frame[features], frame[args.target], groups=frame[args.recording].to_numpy())
+    except ValueError as exc:
+        raise CommandError(f"{args.data}: {exc}") from exc
+    write_output(args.output, model.export_json)
+    _log(
+        args,
+        f"Fitted K={args.n_states} on {len(features)} input(s): {', '.join(features)}; "
+        f"wrote {args.output}",
+    )
+    return 0
+
+
+def command_predict(args):
+    data_path = Path(args.data)
+    output = Path(
+        args.output or data_path.with_name(f"{data_path.stem}_predicted{data_path.suffix}")
+    )
+    check_output(output, overwrite=args.overwrite, inputs=[args.data, args.model])
+    model = load_model(args.model)
+    frame = _ordered_data(args)
+    features = list(model.feature_names_in_)
+    check_columns(frame, features, args.data)
+    names = [f"{args.prefix}{n}" for n in ("estimate", "estimate_std")]
+    names += [f"{args.prefix}state_{k}" for k in range(model.n_states)]
+    taken = [name for name in names if name in frame.columns]
+    if taken:
+        raise CommandError(
+            f"{args.data} already has the column(s) {taken}, which predict writes: rename "
+            "them, or pass --prefix to write the predictions under other names"
+        )
+    groups = frame[args.recording].to_numpy()
+    try:
+        estimate, std = model.predict(frame[features], groups=groups, return_std=True)
+        proba = model.predict_state_proba(frame[features], groups=groups)
+    except ValueError as exc:
+        raise CommandError(f"{args.data}: {exc}") from exc
+    written = {
+        f"{args.prefix}estimate": estimate,
+        f"{args.prefix}estimate_std": std,
+        **{f"{args.prefix}state_{k}": proba[:, k] for k in range(proba.shape[1])},
+    }
+    result = pd.concat([frame, pd.DataFrame(written, index=frame.index)], axis=1)
+    if output.suffix in (".parquet", ".pq"):
+        write_output(output, result.to_parquet)
+    else:
+        write_output(output, lambda partial: result.to_csv(partial, index=False))
+    _log(args, f"Wrote {output} ({len(result)} rows)")
+    return 0
+
+
+def _add_data_options(parser, *, file_order=False):
+    parser.add_argument("--target", default=TARGET, help="target column")
+    parser.add_argument("--recording", default=RECORDING, help="recording-id column")
+    text = "time column [s]: rows are sorted by it within each recording; never an input"
+    if file_order:
+        text += f" ('{NO_TIME}': no time column, the rows are taken in file order)"
+    parser.add_argument("--time", default=TIME, help=text)
+
+
+def _add_output_options(parser, default, text):
+    parser.add_argument("--output", default=default, help=text)
+    text = "replace an existing output that is not a skhmmgmr report (never an input)"
+    parser.add_argument("--overwrite", action="store_true", help=text)
+
+
+def _add_framework_options(parser, defaults=None):
+    """Options of ``demo`` and ``select``; ``defaults=None``: the demo's scale decides."""
+    framework = _framework_defaults()
+    parser.add_argument("--seed", type=int, default=0, help="random seed")
+    parser.add_argument(
+        "--n-jobs", type=int, default=-1, help="parallel fits with joblib; -1: all cores"
+    )
+    add_scheduler_option(parser)
+    _add_output_options(parser, "skhmmgmr_report", "report folder")
+    text = "accuracy/smoothness weights of every choice"
+    parser.add_argument("--trade-off", default=framework["trade_off"], help=text)
+    helps = {
+        "n_top": "features kept by the filter",
+        "k_max": "largest number of states",
+        "trade_off_step": "step of the trade-offs mapped by the relevance [%%]",
+    }
+    for name, text in helps.items():
+        if defaults is None:
+            default, text = None, f"{text} {_demo_default(name)}"
+        else:
+            default = defaults[name]
+        parser.add_argument(f"--{name.replace('_', '-')}", type=int, default=default, help=text)
+
+
+def build_parser():
+    description = "HMM-GMR driver steering-torque models."
+    parser = argparse.ArgumentParser(
+        "skhmmgmr", description=description, formatter_class=_HelpFormatter
+    )
+    parser.add_argument("--quiet", action="store_true", help="print results only")
+    sub = parser.add_subparsers(dest="command", required=True)
+    quiet = argparse.ArgumentParser(add_help=False)
+    # SUPPRESS keeps a --quiet given before the sub-command
+    text = "print results only (default: False)"
+    quiet.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=text)
+    common = dict(parents=[quiet], formatter_class=_HelpFormatter)
+
+    demo = sub.add_parser(
+        "demo",
+        help="run the whole framework on simulated drivers and write a report",
+        description="Simulate the thesis' protocol for several virtual drivers, select the "
+        "features and K, compare the final model with the all-feature baseline on the test "
+        "sections, and write an HTML report with its tables and figures.",
+        **common,
+    )
+    demo.add_argument(
+        "--full", action="store_true", help="thesis scale: 5-minute sections, top 10, K<=20"
+    )
+    drivers = ["defensive", "aggressive", "novice"]
+    demo.add_argument("--drivers", nargs="+", default=drivers, help="driver styles")
+    demo.add_argument(
+        "--duration", type=float, help=f"section length [s] {_demo_default('duration')}"
+    )
+    demo.add_argument("--sampling-rate", type=float, default=20.0, help="logging rate [Hz]")
+    demo.add_argument("--features", nargs="+", help="candidate features (default: all 18)")
+    _add_framework_options(demo)
+    demo.set_defaults(handler=command_demo)
+
+    select = sub.add_parser(
+        "select",
+        help="run the whole framework on your recordings and write a report",
+        description="Parameter selection on CSV/Parquet recordings (a file, or a folder with "
+        "one file per recording). Rows are sorted by time within each recording. Recordings are "
+        "split by the --split column (values train, validation, test); without it they are "
+        "drawn at random by recording with --validation-fraction and --test-fraction.",
+        **common,
+    )
+    select.add_argument("data", help="CSV or Parquet file, or a folder of them")
+    _add_data_options(select)
+    select.add_argument("--split", default=SPLIT, help="split column")
+    select.add_argument("--features", nargs="+", help="candidate features (default: all numeric)")
+    text = "check that every recording is sampled at this rate [Hz], or with --max-gap resample"
+    select.add_argument("--sampling-rate", type=float, help=text + " to it (default: neither)")
+    text = "gaps up to this many seconds are interpolated, a longer one splits its recording"
+    select.add_argument("--max-gap", type=float, help=text + " (default: no resampling)")
+    for part in ("validation", "test"):
+        help_text = f"share of the recordings drawn for {part} when there is no split column"
+        select.add_argument(f"--{part}-fraction", type=float, default=0.25, help=help_text)
+    framework = _framework_defaults()
+    # relevance_trade_offs=None of select_parameters maps the trade-offs in 10% steps
+    _add_framework_options(
+        select, {"n_top": framework["n_top"], "k_max": framework["k_max"], "trade_off_step": 10}
+    )
+    select.set_defaults(handler=command_select)
+
+    report = sub.add_parser(
+        "report",
+        help="re-render the HTML page of a report folder from its saved tables",
+        description="Rebuild index.html from manifest.json, the CSV tables and the PNG figures.",
+        **common,
+    )
+    report.add_argument("result_dir", help="folder written by 'skhmmgmr demo' or 'select'")
+    report.set_defaults(handler=command_report)
+
+    fit = sub.add_parser("fit", help="fit a model on CSV/Parquet recordings", **common)
+    fit.add_argument("data", help="CSV or Parquet file, one row per sample")
+    _add_data_options(fit, file_order=True)
+    fit.add_argument("--features", nargs="+", help="feature columns (default: all numeric)")
+    fit.add_argument("--n-states", type=int, default=5, help="number of hidden states K")
+    fit.add_argument("--n-init", type=int, default=1, help="EM restarts, the best one is kept")
+    fit.add_argument("--seed", type=int, default=0, help="random seed")
+    _add_output_options(fit, "model.json", "model file to write (portable JSON)")
+    fit.set_defaults(handler=command_fit)
+
+    predict = sub.add_parser(
+        "predict", help="write estimate, std and state probabilities", **common
+    )
+    predict.add_argument("model", help="model file (portable JSON) written by 'skhmmgmr fit'")
+    predict.add_argument("data", help="CSV or Parquet file")
+    _add_data_options(predict, file_order=True)
+    _add_output_options(predict, None, "output file (default: DATA_predicted.EXT)")
+    predict.add_argument(
+        "--prefix",
+        default="",
+        help="written before the names of the columns predict adds (estimate, estimate_std, "
+        "state_0, ...), when the data already has columns of those names",
+    )
+    predict.set_defaults(handler=command_predict)
+    return parser
+
+
+def main(argv=None):
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.handler(args)
+    except CommandError as exc:
+        print(f"skhmmgmr {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

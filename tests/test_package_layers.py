@@ -1,0 +1,136 @@
+"""The package's layers, read from its imports: no module imports a layer above its own.
+
+Every top-level entry of ``skhmmgmr/`` (a subpackage or a module) sits in one layer of
+:data:`LAYERS`, the lowest first. A module may import its own entry and any entry of a lower
+layer; an import of an entry of its own layer or of a higher one fails the test, named with
+its file and line. Every import counts: relative and absolute, at the top of a module or inside
+a function. ``docs/architecture.rst`` describes the same layers.
+"""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "skhmmgmr"
+
+#: The layers, lowest first; entries of one layer do not import each other.
+LAYERS = (
+    # the ground floor: shared checks, schema, recordings, the version, where 0.1.0's modules went
+    ("_core", "_version", "_legacy"),
+    # the HMM-GMR engine, the metrics, the datasets and the figures: each on the ground alone
+    ("_hmm", "metrics", "datasets", "plotting"),
+    # what reads a fitted model: its JSON form, the stream; the EM on a dask cluster
+    ("portable", "streaming", "cluster"),
+    # the scikit-learn estimator
+    ("estimator",),
+    # what uses the estimator: the torque pipeline, the search over recordings
+    ("torque_pipeline", "_search"),
+    # the selectors
+    ("feature_selection", "state_selection"),
+    # the framework over all selectors, the users' checks
+    ("selection", "utils"),
+    # the command line and its report
+    ("cli",),
+    # the package's face
+    ("__init__", "__main__"),
+)
+RANK = {entry: rank for rank, layer in enumerate(LAYERS) for entry in layer}
+MAX_TOP_LEVEL_ENTRIES = 20
+
+
+def _entry(parts):
+    """The top-level entry of a module path inside the package (``("_hmm", "_em")`` -> _hmm)."""
+    return parts[0] if parts else "__init__"
+
+
+def imported_entries(path, tree):
+    """(line, entry, text) of every import of the package in a module, the entry it reaches."""
+    parts = list(path.relative_to(PACKAGE).with_suffix("").parts)
+    package = parts[:-1]  # an __init__.py's package is its folder, as any module's
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                names = alias.name.split(".")
+                if names[0] == "skhmmgmr":
+                    found.append((node.lineno, _entry(names[1:]), f"import {alias.name}"))
+        elif isinstance(node, ast.ImportFrom):
+            if node.level == 0:
+                names = (node.module or "").split(".")
+                if names[0] != "skhmmgmr":
+                    continue
+                target = names[1:]
+            else:
+                if node.level - 1 > len(package):
+                    continue
+                target = package[: len(package) - (node.level - 1)]
+                target += node.module.split(".") if node.module else []
+            text = f"from {'.' * node.level}{node.module or ''} import ..."
+            if target:
+                found.append((node.lineno, target[0], text))
+            else:  # from the package itself: each name is an entry, or a name of the face
+                for alias in node.names:
+                    name = alias.name
+                    exists = (PACKAGE / name).is_dir() or (PACKAGE / f"{name}.py").is_file()
+                    found.append((node.lineno, name if exists else "__init__", text))
+    return found
+
+
+def _offences():
+    offences = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        own = _entry(list(path.relative_to(PACKAGE).with_suffix("").parts))
+        tree = ast.parse(path.read_text(), filename=str(path))
+        for line, entry, text in imported_entries(path, tree):
+            if entry == own:
+                continue
+            if RANK[entry] >= RANK[own]:
+                offences.append(
+                    f"skhmmgmr/{path.relative_to(PACKAGE)}:{line}: {own} (layer {RANK[own]}) "
+                    f"imports {entry} (layer {RANK[entry]}): {text}"
+                )
+    return offences
+
+
+def test_every_top_level_entry_has_a_layer():
+    entries = {
+        p.stem if p.suffix == ".py" else p.name
+        for p in PACKAGE.iterdir()
+        if (p.suffix == ".py" or (p / "__init__.py").is_file())
+    }
+    assert entries == set(RANK), (
+        f"entries without a layer: {sorted(entries - set(RANK))}; "
+        f"layers naming no entry: {sorted(set(RANK) - entries)}"
+    )
+    assert len(entries) <= MAX_TOP_LEVEL_ENTRIES
+
+
+def test_no_module_imports_its_own_layer_or_a_higher_one():
+    offences = _offences()
+    assert not offences, "imports that run up the layers:\n" + "\n".join(offences)
+
+
+@pytest.mark.parametrize(
+    "file, source, expected",
+    [
+        ("_hmm/_em.py", "from ._gaussian import x", "_hmm"),
+        ("_hmm/_em.py", "from .._core._panel import x", "_core"),
+        ("_hmm/_em.py", "def f():\n    from ..estimator import x", "estimator"),
+        ("_hmm/__init__.py", "from ..metrics import x", "metrics"),
+        ("_hmm/_em.py", "import skhmmgmr.cli._commands", "cli"),
+        ("_hmm/_em.py", "from skhmmgmr.selection._framework import x", "selection"),
+        ("cli/_report.py", "from .. import plotting", "plotting"),
+        ("cli/_report.py", "from .. import __version__", "__init__"),
+        ("portable.py", "from ._version import __version__", "_version"),
+    ],
+)
+def test_the_rule_reads_every_kind_of_import(file, source, expected):
+    found = imported_entries(PACKAGE / file, ast.parse(source))
+    assert [entry for _, entry, _ in found] == [expected]
+
+
+def test_the_rule_reports_an_import_that_runs_up():
+    tree = ast.parse("import numpy\n\ndef f():\n    from ..estimator import HMMGMRRegressor\n")
+    ((line, entry, _),) = imported_entries(PACKAGE / "_hmm" / "_em.py", tree)
+    assert (line, entry) == (4, "estimator") and RANK[entry] > RANK["_hmm"]
