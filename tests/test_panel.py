@@ -248,3 +248,54 @@ def test_a_y_whose_index_is_not_xs_is_refused(change):
         HMMGMRRegressor(n_states=2, random_state=0).fit(X, y)
     # an array pairs by position, as scikit-learn does
     HMMGMRRegressor(n_states=2, random_state=0).fit(X, np.asarray(_shuffled_panel()[1]))
+
+
+# --- #34: sktime's level names are read; an index of other names is refused -------------------
+
+
+def _renamed(frame, names):
+    out = frame.copy()
+    out.index = out.index.set_names(names)
+    return out
+
+
+@pytest.mark.parametrize(
+    "names", [["instances", "timepoints"], ["recording", "timepoints"], ["instances", "time"]]
+)
+def test_sktime_level_names_are_read_like_the_packages(names):
+    """A panel with sktime's names was one recording (0.06 Nm off; 0.11 shuffled), and
+    recording + timepoints ignored the time level."""
+    from skhmmgmr import HMMGMRRegressor
+
+    X, y = _shuffled_panel(3)
+    model = HMMGMRRegressor(n_states=2, random_state=0).fit(X, y)
+    expected = model.predict(X)
+    other = _renamed(X, names)
+    np.testing.assert_allclose(model.predict(other), expected, rtol=0, atol=1e-12)
+    shuffled = other.sample(frac=1.0, random_state=2)
+    got = pd.Series(model.predict(shuffled), index=shuffled.index).reindex(other.index)
+    np.testing.assert_allclose(got.to_numpy(), expected, rtol=0, atol=1e-12)
+    refitted = HMMGMRRegressor(n_states=2, random_state=0).fit(shuffled, _renamed(y, names))
+    np.testing.assert_allclose(refitted.means_, model.means_, rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize(
+    "names, message",
+    [
+        (["run", "t"], r"the levels \['run', 't'\], none of which holds the recording ids"),
+        ([None, None], r"the levels \[None, None\], none of which"),
+    ],
+)
+def test_a_two_level_index_that_is_no_panel_is_refused(names, message):
+    from skhmmgmr import HMMGMRRegressor
+
+    X, y = _shuffled_panel(4)
+    with pytest.raises(ValueError, match=message):
+        HMMGMRRegressor(n_states=2, random_state=0).fit(_renamed(X, names), np.asarray(y))
+
+
+def test_two_levels_for_the_recordings_are_refused():
+    X, _ = _shuffled_panel(5)
+    X = X.set_index(pd.Index(X.index.get_level_values(0), name="instances"), append=True)
+    with pytest.raises(ValueError, match="both a 'recording' and a 'instances' level"):
+        read_row_order(X)

@@ -1,7 +1,8 @@
 """Recordings in the index: the panel form of a data set.
 
 A pandas ``DataFrame`` or ``Series`` whose index has a level named ``recording`` (and optionally
-a level ``time``) carries its recording ids with its rows, so they survive every tool that
+a level ``time``; sktime's names ``instances`` and ``timepoints`` are read as well) carries its
+recording ids with its rows, so they survive every tool that
 slices, resamples or shuffles rows without passing ``groups`` on: ``cross_val_predict``,
 built-in scorers, ``permutation_importance``, successive halving, conformal wrappers. This
 module reads that index and puts the rows into the order the filter needs (recordings
@@ -51,13 +52,42 @@ class RowOrder:
         return restored
 
 
+# Names under which the index levels are read: the package's own, then sktime's (its panel
+# form, "pd-multiindex", names them instances and timepoints).
+RECORDING_LEVELS = (RECORDING, "instances")
+TIME_LEVELS = (TIME, "timepoints")
+
+
+def _level(index, names, what):
+    found = [name for name in names if name in index.names]
+    if len(found) > 1:
+        raise ValueError(
+            f"X's index has both a {found[0]!r} and a {found[1]!r} level: which holds the "
+            f"{what}? Drop or rename one (its levels are {list(index.names)})."
+        )
+    return index.get_level_values(found[0]) if found else None
+
+
 def index_levels(X):
-    """The ``recording`` and ``time`` levels of the index of ``X`` (each ``None`` if absent)."""
+    """The recording and time levels of the index of ``X`` (each ``None`` if absent), read
+    under the names of :data:`RECORDING_LEVELS` and :data:`TIME_LEVELS`.
+
+    An index of two levels or more without a recording level is refused naming its levels:
+    read as one recording, a panel whose levels bear other names would filter across its
+    recordings without a word.
+    """
     if not isinstance(X, pd.DataFrame | pd.Series):
         return None, None
-    names = list(X.index.names)
-    recording = X.index.get_level_values(RECORDING) if RECORDING in names else None
-    time = X.index.get_level_values(TIME) if TIME in names else None
+    index = X.index
+    recording = _level(index, RECORDING_LEVELS, "recording ids")
+    time = _level(index, TIME_LEVELS, "times")
+    if recording is None and index.nlevels > 1:
+        raise ValueError(
+            f"X's index has the levels {list(index.names)}, none of which holds the recording "
+            "ids. Name them, 'recording' (or sktime's 'instances') and 'time' (or "
+            "'timepoints'), e.g. X.rename_axis(['recording', 'time']); or give X a plain index "
+            "and the recordings as groups=."
+        )
     return recording, time
 
 
