@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from ._schema import RECORDING, TIME
+from ._sequences import as_recordings
 
 
 @dataclass(frozen=True)
@@ -122,7 +123,7 @@ def align_target(X, y):
     return y.reindex(X.index)
 
 
-def read_row_order(X, groups=None, time=None, *, sort_recordings=False):
+def read_row_order(X, groups=None, time=None, *, sort_recordings=False, sort_groups=False):
     """Recording ids, time stamps and row order of a call, from arguments or the index of X.
 
     ``groups`` and ``time`` given explicitly win over nothing: when the index holds them too,
@@ -139,6 +140,11 @@ def read_row_order(X, groups=None, time=None, *, sort_recordings=False):
         first appearance, so that the filter order does not depend on how the rows were
         shuffled: a fit (whose initialization reads the rows in order) then gives the same
         model for any permutation of the rows.
+    sort_groups : bool, default=False
+        Likewise for the recordings of a plain ``X`` given by ``groups`` (contiguous, each in
+        time order): a fit then gives the same model as for the panel of the same rows,
+        whatever the order of the recordings. Not for callers whose other inputs are indexed
+        by row position (a ``PredefinedSplit``).
 
     Returns
     -------
@@ -148,6 +154,8 @@ def read_row_order(X, groups=None, time=None, *, sort_recordings=False):
     if index_recording is None:
         if index_time is not None and time is None:
             time = np.asarray(index_time)
+        if sort_groups and groups is not None:
+            return _recordings_in_id_order(groups, time)
         return RowOrder(groups=groups, time=time, order=None)
     ids = _text_ids(index_recording)
     if groups is not None:
@@ -173,6 +181,21 @@ def read_row_order(X, groups=None, time=None, *, sort_recordings=False):
         groups=row_order.to_filter_order(ids),
         time=row_order.to_filter_order(time),
         order=order,
+    )
+
+
+def _recordings_in_id_order(groups, time):
+    """The rows of contiguous recordings (``groups``) with the recordings in order of their
+    ids as text, as :func:`read_row_order` puts a panel's with ``sort_recordings``."""
+    groups = np.asarray(groups.to_numpy() if isinstance(groups, pd.Series) else groups)
+    recordings = as_recordings(groups, len(groups))  # refuses scattered recordings, naming one
+    rank = np.argsort(np.asarray(recordings.ids).astype(str), kind="stable")
+    if np.array_equal(rank, np.arange(len(rank))):
+        return RowOrder(groups=groups, time=time, order=None)
+    order = np.concatenate([np.arange(recordings.starts[r], recordings.stops[r]) for r in rank])
+    given = RowOrder(groups=groups, time=time, order=order)
+    return RowOrder(
+        groups=given.to_filter_order(groups), time=given.to_filter_order(time), order=order
     )
 
 

@@ -240,10 +240,11 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         self : HMMGMRRegressor
         """
         emission_family(self.covariance_type)  # refuses "diag" and "spherical", saying why
-        # Recordings of an indexed X in order of their ids: the initialization reads the rows
-        # in order, so a shuffle of the rows (a resampling search) must not change it.
+        # Recordings in order of their ids, whether from the index or from groups: the
+        # initialization reads the rows in order, so neither a shuffle of a panel's rows (a
+        # resampling search) nor the order of the recordings given as arrays may change it.
         y = align_target(X, y)
-        rows = read_row_order(X, groups, time, sort_recordings=True)
+        rows = read_row_order(X, groups, time, sort_recordings=True, sort_groups=True)
         X, y, groups, time = (
             rows.to_filter_order(X),
             rows.to_filter_order(y),
