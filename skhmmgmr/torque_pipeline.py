@@ -20,6 +20,7 @@ first-order filter (``velocity_filter``, within each recording) keeps that noise
 friction input.
 """
 
+import inspect
 import math
 import numbers
 
@@ -30,13 +31,13 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.pipeline import Pipeline
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ._core._compat import Interval, _fit_context
+from ._core._compat import Interval, _fit_context, _routing_enabled
 from ._core._docstrings import fill_shared_parameters
-from ._core._panel import read_row_order
+from ._core._panel import has_recording_index, read_row_order
 from ._core._sequences import as_recordings
 from .estimator._regressor import HMMGMRRegressor
 
-__all__ = ["SteeringFeatures", "make_torque_pipeline"]
+__all__ = ["SteeringFeatures", "TorquePipeline", "make_torque_pipeline"]
 
 FRICTION_NAME = "steering_friction"
 
@@ -392,6 +393,147 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
         return tags
 
 
+def _takes_groups(step, method):
+    """Whether ``step`` has ``method`` and that method takes ``groups``."""
+    function = getattr(step, method, None)
+    return function is not None and "groups" in inspect.signature(function).parameters
+
+
+def _needs_recordings(step):
+    """Whether the step's output depends on where recordings begin (a filter over the rows)."""
+    return isinstance(step, SteeringFeatures) and step.velocity_filter is not None
+
+
+class TorquePipeline(Pipeline):
+    """The :class:`~sklearn.pipeline.Pipeline` of :func:`make_torque_pipeline`: recordings
+    given once reach every step that reads them.
+
+    ``fit``, ``predict``, ``score`` and ``transform`` take ``groups`` (the recording id of
+    every row) and hand it to every step whose method takes it, with scikit-learn's metadata
+    routing on or off; with routing off, a scikit-learn ``Pipeline`` passes ``groups`` only to
+    the steps named in ``<step>__groups`` at fit and to no transformer at predict, so a
+    velocity filter would run across recordings. A ``<step>__groups`` that leaves out a step
+    whose output depends on the recordings is refused, naming the step. Recordings in the
+    index of a panel (:func:`skhmmgmr.datasets.to_panel`) reach every step as they are.
+
+    Parameters are those of :class:`~sklearn.pipeline.Pipeline`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skhmmgmr import make_torque_pipeline
+    >>> from skhmmgmr.datasets import FEATURE_NAMES, make_driving_protocol
+    >>> data = make_driving_protocol(("defensive",), duration=10.0, sampling_rate=20.0)
+    >>> X, y = data[list(FEATURE_NAMES)], data["driver_torque"]
+    >>> pipe = make_torque_pipeline(2, velocity_filter=0.1, sampling_period=0.05, random_state=0)
+    >>> pipe = pipe.fit(X, y, groups=data["recording"])
+    >>> pipe.predict(X, groups=data["recording"]).shape
+    (4800,)
+    """
+
+    def fit(self, X, y=None, groups=None, **params):
+        """Fit every step, ``groups`` handed to every step whose ``fit`` takes it.
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_features)
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row.
+        **params : dict
+            As for :meth:`sklearn.pipeline.Pipeline.fit`.
+
+        Returns
+        -------
+        self : TorquePipeline
+        """
+        return super().fit(X, y, **self._fit_params(X, groups, params))
+
+    def _fit_params(self, X, groups, params):
+        if groups is not None:
+            if _routing_enabled():
+                return {**params, "groups": groups}
+            for name, step in self.steps:
+                if _takes_groups(step, "fit"):
+                    params = {**params, f"{name}__groups": groups}
+            return params
+        given = [name for name, _ in self.steps if f"{name}__groups" in params]
+        missing = [
+            name
+            for name, step in self.steps
+            if _needs_recordings(step) and f"{name}__groups" not in params
+        ]
+        if given and missing and not has_recording_index(X):
+            raise ValueError(
+                f"The recordings (groups) reach the step(s) {given} but not {missing}, whose "
+                "output depends on where each recording begins (a filter over the rows): pass "
+                f"groups= to the pipeline itself, which hands them to every step, or give X the "
+                "recordings in its index (skhmmgmr.datasets.to_panel)."
+            )
+        return params
+
+    def _transformed(self, X, groups, with_final):
+        """``X`` through the transformers (all steps with ``with_final``), ``groups`` handed
+        to those whose ``transform`` takes it."""
+        steps = self.steps if with_final else self.steps[:-1]
+        for _, step in steps:
+            if step is None or step == "passthrough":
+                continue
+            X = (
+                step.transform(X, groups=groups)
+                if _takes_groups(step, "transform")
+                else (step.transform(X))
+            )
+        return X
+
+    def predict(self, X, groups=None, **params):
+        """The final step's prediction, ``groups`` handed to every step that takes it.
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_features)
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row.
+        **params : dict
+            Passed to the final step's ``predict`` (such as ``return_std=True``).
+
+        Returns
+        -------
+        y_pred : ndarray, or a tuple with ``return_std``
+        """
+        if groups is None or _routing_enabled():
+            extra = {} if groups is None else {"groups": groups}
+            return super().predict(X, **extra, **params)
+        check_is_fitted(self)
+        final = self.steps[-1][1]
+        return final.predict(self._transformed(X, groups, False), groups=groups, **params)
+
+    def score(self, X, y=None, sample_weight=None, groups=None, **params):
+        """The final step's score, ``groups`` handed to every step that takes it.
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_features)
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
+        sample_weight : array-like of shape (n_samples,), default=None
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row.
+        **params : dict
+            As for :meth:`sklearn.pipeline.Pipeline.score`.
+
+        Returns
+        -------
+        score : float
+        """
+        if groups is None or _routing_enabled():
+            extra = {} if groups is None else {"groups": groups}
+            return super().score(X, y, sample_weight=sample_weight, **extra, **params)
+        check_is_fitted(self)
+        final = self.steps[-1][1]
+        weights = {} if sample_weight is None else {"sample_weight": sample_weight}
+        return final.score(self._transformed(X, groups, False), y, groups=groups, **weights)
+
+
 @fill_shared_parameters
 def make_torque_pipeline(
     n_states=5,
@@ -407,12 +549,12 @@ def make_torque_pipeline(
 
     The pipeline is ``SteeringFeatures`` (step ``"steering_features"``) then
     :class:`~skhmmgmr.HMMGMRRegressor` (step ``"hmmgmr"``). It takes data frames with the
-    package's column names (:data:`skhmmgmr.datasets.FEATURE_NAMES`); recordings reach the
-    steps in the index of a panel (:func:`skhmmgmr.datasets.to_panel`), or as ``groups``
-    routed with metadata routing on. With routing off, ``hmmgmr__groups=`` in ``fit`` reaches
-    the regressor only: fine without ``velocity_filter``, but with it the filter of
-    ``SteeringFeatures`` would run across recordings, so use the index or routing then. On the
-    simulator's protocol it is more accurate than a default gradient-boosting regressor and
+    package's column names (:data:`skhmmgmr.datasets.FEATURE_NAMES`); recordings reach both
+    steps in the index of a panel (:func:`skhmmgmr.datasets.to_panel`), or as ``groups=`` given
+    to the pipeline's ``fit``, ``predict`` and ``score`` (:class:`TorquePipeline`), with
+    metadata routing on or off. ``hmmgmr__groups=`` alone is refused with ``velocity_filter``:
+    the filter of ``SteeringFeatures`` would run across recordings. On the simulator's
+    protocol it is more accurate than a default gradient-boosting regressor and
     smoother (see "When to use HMM-GMR" in the user guide, and
     ``benchmarks/bench_baselines.py``).
 
@@ -433,8 +575,9 @@ def make_torque_pipeline(
 
     Returns
     -------
-    pipeline : Pipeline
-        Unfitted; ``pipeline[-1]`` is the regressor.
+    pipeline : TorquePipeline
+        A scikit-learn ``Pipeline``, unfitted; ``pipeline[-1]`` is the regressor. ``groups``
+        given to its ``fit``, ``predict`` and ``score`` reach both steps.
 
     Examples
     --------
@@ -455,7 +598,7 @@ def make_torque_pipeline(
             "HMMGMRRegressor's "
             f"parameters {sorted(accepted)}."
         )
-    return Pipeline(
+    return TorquePipeline(
         [
             (
                 "steering_features",

@@ -361,3 +361,72 @@ def test_a_period_the_time_level_contradicts_is_refused():
         wrong.fit_transform(X)
     right = SteeringFeatures(velocity_filter=0.02, sampling_period=0.01).fit_transform(X)
     assert np.isfinite(right["steering_friction"]).all()
+
+
+# --- #34: the package's pipeline hands the recordings to every step ----------------------------
+
+
+def _protocol(seed=0):
+    from skhmmgmr.datasets import FEATURE_NAMES, make_driving_protocol
+
+    data = make_driving_protocol(
+        ("defensive",), duration=6.0, sampling_rate=100.0, random_state=seed
+    )
+    return data[list(FEATURE_NAMES)], data["driver_torque"], data["recording"].to_numpy(), data
+
+
+def _filtered_pipeline():
+    return make_torque_pipeline(2, velocity_filter=0.02, sampling_period=0.01, random_state=0)
+
+
+def test_groups_given_to_the_pipeline_reach_the_velocity_filter():
+    """With routing off, hmmgmr__groups reached the regressor only and the filter ran across
+    recordings (up to 0.11 Nm off, no warning)."""
+    from skhmmgmr.datasets import to_panel
+
+    X, y, groups, data = _protocol()
+    with_groups = _filtered_pipeline().fit(X, y, groups=groups)
+    estimate = with_groups.predict(X, groups=groups)
+    panel = to_panel(data)
+    from_panel = _filtered_pipeline().fit(panel[X.columns], panel["driver_torque"])
+    expected = from_panel.predict(panel[X.columns])
+    np.testing.assert_allclose(estimate, expected, rtol=0, atol=1e-12)
+    assert with_groups.score(X, y, groups=groups) == pytest.approx(
+        from_panel.score(panel[X.columns], panel["driver_torque"]), abs=1e-12
+    )
+    one_recording = with_groups.predict(X)
+    assert np.abs(one_recording - estimate).max() > 1e-3  # the recordings matter here
+
+
+def test_a_step_that_needs_the_recordings_may_not_be_left_without_them():
+    X, y, groups, _ = _protocol()
+    with pytest.raises(ValueError, match=r"reach the step\(s\) \['hmmgmr'\] but not \['steering_"):
+        _filtered_pipeline().fit(X, y, hmmgmr__groups=groups)
+    # without a velocity filter the transformer reads rows one by one: nothing is refused
+    make_torque_pipeline(2, random_state=0).fit(X, y, hmmgmr__groups=groups)
+
+
+def test_groups_are_routed_alike_with_metadata_routing_on():
+    X, y, groups, _ = _protocol()
+    off = _filtered_pipeline().fit(X, y, groups=groups).predict(X, groups=groups)
+    with sklearn.config_context(enable_metadata_routing=True):
+        on = _filtered_pipeline().fit(X, y, groups=groups).predict(X, groups=groups)
+    np.testing.assert_allclose(on, off, rtol=0, atol=1e-12)
+
+
+def test_the_performance_score_predicts_the_pipeline_once(monkeypatch):
+    """A scorer on a Pipeline fell back to one predict call per recording."""
+    from skhmmgmr import PerformanceScore
+
+    X, y, groups, _ = _protocol()
+    pipe = _filtered_pipeline().fit(X, y, groups=groups)
+    calls = []
+    original = HMMGMRRegressor.predict
+
+    def counted(self, *args, **kwargs):
+        calls.append(1)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(HMMGMRRegressor, "predict", counted)
+    PerformanceScore(0.5, 0.5, sampling_period=0.01)(pipe, X, y, groups=groups)
+    assert len(calls) == 1 and len(np.unique(groups)) > 1
