@@ -321,3 +321,21 @@ def test_one_canonical_order_for_a_panel_and_for_arrays_with_groups():
     scattered = np.tile(["a", "b"], len(ids) // 2)
     with pytest.raises(ValueError, match="'a'"):
         HMMGMRRegressor(**params).fit(X.to_numpy(), y.to_numpy(), groups=scattered)
+
+
+def test_many_rows_fitted_as_one_recording_without_saying_so_warn():
+    """#34: nothing said that a long fit without recordings was one recording."""
+    from skhmmgmr import HMMGMRRegressor
+    from skhmmgmr.estimator._prediction_inputs import ONE_RECORDING_ROWS
+
+    rng = np.random.default_rng(7)
+    n = ONE_RECORDING_ROWS + 1
+    X = np.cumsum(rng.normal(scale=0.1, size=(n, 1)), axis=0)
+    y = np.tanh(X[:, 0])
+    params = {"n_states": 1, "random_state": 0, "n_iter": 2}
+    with pytest.warns(UserWarning, match=r"ONE recording.*groups=.*'recording' level.*say so"):
+        HMMGMRRegressor(**params).fit(X, y)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        HMMGMRRegressor(**params).fit(X, y, groups=np.zeros(n))  # said so
+        HMMGMRRegressor(**params).fit(X[:ONE_RECORDING_ROWS], y[:ONE_RECORDING_ROWS])

@@ -48,3 +48,23 @@ def warn_if_one_long_recording(estimator, n_samples):
             UserWarning,
             stacklevel=3,
         )
+
+
+# Rows a fit reads as one recording without a word: more is longer than any one drive of the
+# thesis' protocol (5-minute sections at 100 Hz are 30,000 rows) by far.
+ONE_RECORDING_ROWS = 50_000
+
+
+def warn_if_fitted_as_one_recording(n_samples):
+    """Warn when a fit gets ``n_samples`` rows, more than :data:`ONE_RECORDING_ROWS`, with
+    neither ``groups`` nor a recording index: they are fitted as one recording."""
+    if n_samples > ONE_RECORDING_ROWS:
+        warnings.warn(
+            f"{n_samples} rows without groups are fitted as ONE recording. If they hold "
+            "several recordings, pass groups=<recording id per row>, or give X a pandas index "
+            "with a 'recording' level (skhmmgmr.datasets.to_panel); if they are one "
+            "recording, say so with groups=<the same id on every row>, which also lets "
+            "predict warn about longer inputs.",
+            UserWarning,
+            stacklevel=3,
+        )

@@ -31,7 +31,11 @@ from .._hmm._missing import observed_counts
 from .._hmm._stale_inputs import MISSING_VALUES, learn_stale_noise
 from ._adaptation import AdaptMixin
 from ._io import ModelIOMixin
-from ._prediction_inputs import read_inputs, warn_if_one_long_recording
+from ._prediction_inputs import (
+    read_inputs,
+    warn_if_fitted_as_one_recording,
+    warn_if_one_long_recording,
+)
 
 
 class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstimator):
@@ -256,6 +260,8 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         X, y = validate_joint(self, X, y, allow_nan=allow_nan)
         Y = y.reshape(-1, 1) if y.ndim == 1 else y
         self.n_outputs_ = Y.shape[1]
+        if groups is None:
+            warn_if_fitted_as_one_recording(X.shape[0])
         recordings = as_recordings(groups, X.shape[0], time=time, min_length=2)
         # Without recordings there is nothing to compare a later prediction's length with.
         self.longest_recording_ = None if groups is None else int(recordings.lengths.max())
