@@ -61,7 +61,7 @@ from numbers import Integral
 
 import numpy as np
 
-from ._hmm._emissions import make_emissions
+from ._hmm._emissions import emission_family
 from ._hmm._fitted import FittedHMMGMR, Standardization
 from ._hmm._gaussian import NotPositiveDefiniteError
 from ._hmm._stale_inputs import MAX_LAG, StaleInputNoise
@@ -118,7 +118,6 @@ def to_dict(model, *, estimator_params=None, fit_info=None, output_names=None):
     estimator_params = dict(estimator_params or {})
     if not isinstance(estimator_params.get("random_state"), Integral | None):
         estimator_params["random_state"] = None
-    data_emissions = model.data_emissions
     data = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
@@ -140,16 +139,12 @@ def to_dict(model, *, estimator_params=None, fit_info=None, output_names=None):
             "start_probabilities": model.startprob,
             "transition_matrix": model.transmat,
             "input_means": gmr.gating.means,
-            "input_precision_cholesky": gmr.gating.precisions_chol,
+            "input_precision_cholesky": gmr.gating.whitening(),
             "regression_coefficients": gmr.coef,
             "regression_intercepts": gmr.intercept,
             "conditional_covariances": gmr.conditional_covariances,
         },
-        "joint": {
-            "covariance_type": model.covariance_type,
-            "means": data_emissions.means,
-            "covariances": data_emissions.full_covariances,
-        },
+        "joint": model.data_emissions.portable_joint(),
         "estimator_params": estimator_params,
         "fit_info": dict(fit_info or {}),
     }
@@ -326,18 +321,18 @@ def _stale_noise(block, n_inputs):
 
 
 def _joint_emissions(block, joint):
-    covariance_type = block.get("covariance_type", "full")
-    covariances = joint["covariances"]
-    if covariance_type == "tied":
-        if not np.allclose(covariances, covariances[0], rtol=1e-12, atol=0):
-            raise ValueError("'joint.covariances' must all be equal for covariance_type 'tied'")
-        covariances = covariances[0]
+    """The emission model of the ``joint`` block: its family checks that the covariances
+    have its form."""
     try:
-        return make_emissions(covariance_type, joint["means"], covariances)
+        family = emission_family(block.get("covariance_type", "full"))
+    except ValueError as exc:
+        raise ValueError(f"'joint.covariance_type': {exc}") from exc
+    try:
+        return family.from_state_covariances(joint["means"], joint["covariances"])
     except NotPositiveDefiniteError as exc:
         raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
     except ValueError as exc:
-        raise ValueError(f"'joint.covariance_type': {exc}") from exc
+        raise ValueError(f"'joint.covariances' {exc}") from exc
 
 
 def _check_joint_covariances(covariances):
@@ -435,7 +430,7 @@ def _check_filter_matches_joint(filtering, model):
     gmr = model.gmr
     for key, value in [
         ("input_means", gmr.gating.means),
-        ("input_precision_cholesky", gmr.gating.precisions_chol),
+        ("input_precision_cholesky", gmr.gating.whitening()),
         ("regression_coefficients", gmr.coef),
         ("regression_intercepts", gmr.intercept),
         ("conditional_covariances", gmr.conditional_covariances),

@@ -24,15 +24,16 @@ def to_hmmlearn(model):
     hmm.startprob_ = np.array(model.startprob)
     hmm.transmat_ = np.array(model.transmat)
     hmm.means_ = np.array(emissions.means)
-    hmm.covars_ = np.array(emissions.covariances)
+    hmm.covars_ = emissions.hmmlearn_covars()
     return hmm
 
 
-def _standardization_of(means, covariances, n_inputs):
+def _standardization_of(emissions, n_inputs):
     """Centre and scale of the equally weighted mixture of the states: any positive scale
     gives the same model, this one keeps the filter's numbers near one."""
+    means = emissions.means
     center = means.mean(axis=0)
-    variances = np.diagonal(covariances, axis1=1, axis2=2).mean(axis=0) + means.var(axis=0)
+    variances = emissions.state_variances().mean(axis=0) + means.var(axis=0)
     return Standardization(center, np.sqrt(variances), n_inputs)
 
 
@@ -49,8 +50,7 @@ def from_hmmlearn(hmm, n_outputs=1, feature_names=None):
     for name in ("startprob_", "transmat_", "means_"):
         if not hasattr(hmm, name):
             raise ValueError(f"the hmmlearn model is not fitted: it has no {name}")
-    covariance_type = getattr(hmm, "covariance_type", None)
-    family = emission_family(covariance_type)
+    family = emission_family(getattr(hmm, "covariance_type", None))
     means = np.asarray(hmm.means_, dtype=float)
     n_dims = means.shape[1]
     if not isinstance(n_outputs, int | np.integer) or not 0 < n_outputs < n_dims:
@@ -58,15 +58,14 @@ def from_hmmlearn(hmm, n_outputs=1, feature_names=None):
             f"n_outputs must be an integer in [1, {n_dims - 1}] for a model over {n_dims} "
             f"columns, got {n_outputs!r}"
         )
-    full = np.asarray(hmm.covars_, dtype=float)  # hmmlearn returns (K, D, D) for every type
-    covariances = full[0] if covariance_type == "tied" else full
-    emissions = family(means, covariances)
+    # hmmlearn returns every state's covariance (K, D, D) whatever its covariance type
+    emissions = family.from_state_covariances(means, np.asarray(hmm.covars_, dtype=float))
     n_inputs = n_dims - n_outputs
     return FittedHMMGMR(
         np.asarray(hmm.startprob_, dtype=float),
         np.asarray(hmm.transmat_, dtype=float),
         emissions,
-        _standardization_of(means, full, n_inputs),
+        _standardization_of(emissions, n_inputs),
         scalar_output=n_outputs == 1,
         feature_names=None if feature_names is None else tuple(feature_names),
     )
