@@ -52,6 +52,11 @@ value ``c`` in the recording is ``g`` samples old (``0 < g <= max(lags)``) is ob
 ``c`` with noise variance ``v = variances`` interpolated linearly at ``g``: ``P_mm`` becomes
 ``P_mm + diag(1 / v)`` in the formulas above, ``z_m = mu_m + (P_mm + diag(1/v))^-1 (diag(1/v)
 (c - mu_m) - P_mo (z_o - mu_o))``, and ``b_k`` gains the density of ``c`` given ``z_o``.
+
+:class:`~skhmmgmr.HMMGMRRegressor`'s ``to_dict``, ``export_json``, ``from_dict`` and
+``from_json`` delegate to this module (:func:`estimator_to_dict`, :func:`export_json`,
+:func:`estimator_from_dict`, :func:`estimator_from_json`): the estimator's parameters and fit
+information travel with the model.
 """
 
 import json
@@ -60,7 +65,9 @@ from dataclasses import dataclass
 from numbers import Integral
 
 import numpy as np
+from sklearn.utils.validation import check_is_fitted
 
+from ._core._compat import InvalidParameterError
 from ._hmm._emissions import emission_family
 from ._hmm._fitted import FittedHMMGMR, Standardization
 from ._hmm._gaussian import NotPositiveDefiniteError
@@ -210,6 +217,46 @@ FIT_INFO_KEYS = (
     "n_iter",
     "converged",
 )
+
+
+_HISTORIES = ("log_likelihood_history", "penalized_log_likelihood_history")
+
+
+def estimator_to_dict(estimator, *, output_names=None):
+    """:func:`to_dict` of a fitted estimator's ``model_``, with its ``get_params()`` and
+    fit information (:data:`FIT_INFO_KEYS`, the attributes ``name + "_"``)."""
+    check_is_fitted(estimator)
+    return to_dict(
+        estimator.model_,
+        estimator_params=estimator.get_params(),
+        fit_info={key: getattr(estimator, key + "_", None) for key in FIT_INFO_KEYS},
+        output_names=output_names,
+    )
+
+
+def estimator_from_dict(cls, data):
+    """A fitted estimator of class ``cls`` restored from :func:`to_dict` output: its
+    ``from_fitted_model`` with the stored parameters, then the stored fit information."""
+    portable = read_model(data)
+    try:
+        estimator = cls.from_fitted_model(portable.model, **portable.estimator_params)
+    except InvalidParameterError as exc:
+        raise ValueError(f"'estimator_params' holds a value fit refuses: {exc}") from exc
+    except TypeError as exc:
+        raise ValueError(f"'estimator_params' holds an unknown parameter: {exc}") from exc
+    for key, value in portable.fit_info.items():
+        setattr(estimator, key + "_", np.asarray(value, float) if key in _HISTORIES else value)
+    return estimator
+
+
+def estimator_from_json(cls, path):
+    """A fitted estimator of class ``cls`` restored from a model file (its ``from_dict``);
+    an error names the file."""
+    data = load_json(path)
+    try:
+        return cls.from_dict(data)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from exc
 
 
 @dataclass(frozen=True)

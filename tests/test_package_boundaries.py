@@ -16,6 +16,9 @@ Three rules, checked by walking the abstract syntax tree of every module of the 
   ``.precisions_chol``...): it asks the emission model's methods, so that a new family changes
   one module.
 
+And one rule of ownership: the estimator's exporters (JSON, hmmlearn, stream) are one-line
+methods that call the module owning the format.
+
 Which layer may import which is ``tests/test_package_layers.py``'s rule.
 """
 
@@ -258,6 +261,44 @@ def test_only_the_emission_model_knows_the_covariance_form():
         "method of GaussianEmissions (skhmmgmr/_hmm/_emissions.py) instead:\n"
         + "\n".join(offenders)
     )
+
+
+# The estimator's exporters and the module that owns each format.
+EXPORTER_OWNERS = {
+    "to_dict": "portable",
+    "export_json": "portable",
+    "from_dict": "portable",
+    "from_json": "portable",
+    "to_hmmlearn": "_hmm._hmmlearn",
+    "from_hmmlearn": "_hmm._hmmlearn",
+    "filter_stream": "streaming",
+}
+
+
+def test_the_estimators_exporters_are_one_line_delegations_to_their_owners():
+    """``HMMGMRRegressor``'s JSON, hmmlearn and stream methods hold their docstring and one
+    statement, a call of a name imported from the module that owns the format."""
+    path = PACKAGE / "estimator" / "_io.py"
+    tree = ast.parse(path.read_text())
+    imported = {
+        alias.asname or alias.name: node.module
+        for node in tree.body
+        if isinstance(node, ast.ImportFrom)
+        for alias in node.names
+    }
+    methods = {
+        node.name: node
+        for node in ast.walk(tree)
+        if isinstance(node, ast.FunctionDef) and node.name in EXPORTER_OWNERS
+    }
+    assert set(methods) == set(EXPORTER_OWNERS)
+    for name, method in methods.items():
+        body = method.body[1:] if ast.get_docstring(method) else method.body
+        assert len(body) == 1 and isinstance(body[0], ast.Return | ast.Expr), name
+        call = body[0].value
+        assert isinstance(call, ast.Call) and isinstance(call.func, ast.Name), name
+        owner = imported.get(call.func.id)
+        assert owner == EXPORTER_OWNERS[name], f"{name} calls {call.func.id} of {owner}"
 
 
 @pytest.mark.parametrize(

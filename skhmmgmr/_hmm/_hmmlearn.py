@@ -4,9 +4,13 @@ hmmlearn's model is an HMM over the joint columns ``[inputs, outputs]`` in the d
 ours keeps the same HMM over standardised columns, which changes neither the log-likelihood
 (up to the constant Jacobian of the standardisation, which :class:`Standardization` applies)
 nor the GMR read-out.
+
+:class:`~skhmmgmr.HMMGMRRegressor`'s ``to_hmmlearn`` and ``from_hmmlearn`` delegate to
+:func:`estimator_to_hmmlearn` and :func:`estimator_from_hmmlearn`.
 """
 
 import numpy as np
+from sklearn.utils.validation import check_is_fitted
 
 from ._emissions import emission_family
 from ._fitted import FittedHMMGMR, Standardization
@@ -69,3 +73,16 @@ def from_hmmlearn(hmm, n_outputs=1, feature_names=None):
         scalar_output=n_outputs == 1,
         feature_names=None if feature_names is None else tuple(feature_names),
     )
+
+
+def estimator_to_hmmlearn(estimator):
+    """:func:`to_hmmlearn` of a fitted estimator's ``model_``."""
+    check_is_fitted(estimator)
+    return to_hmmlearn(estimator.model_)
+
+
+def estimator_from_hmmlearn(cls, hmm, *, n_outputs=1, feature_names=None, **params):
+    """A fitted estimator of class ``cls`` (its ``from_fitted_model`` with ``params``) that
+    reads out ``hmm`` (:func:`from_hmmlearn`)."""
+    model = from_hmmlearn(hmm, n_outputs=n_outputs, feature_names=feature_names)
+    return cls.from_fitted_model(model, **params)
