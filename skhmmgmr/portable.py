@@ -52,6 +52,11 @@ value ``c`` in the recording is ``g`` samples old (``0 < g <= max(lags)``) is ob
 ``c`` with noise variance ``v = variances`` interpolated linearly at ``g``: ``P_mm`` becomes
 ``P_mm + diag(1 / v)`` in the formulas above, ``z_m = mu_m + (P_mm + diag(1/v))^-1 (diag(1/v)
 (c - mu_m) - P_mo (z_o - mu_o))``, and ``b_k`` gains the density of ``c`` given ``z_o``.
+
+:class:`~skhmmgmr.HMMGMRRegressor`'s ``to_dict``, ``export_json``, ``from_dict`` and
+``from_json`` delegate to this module (:func:`estimator_to_dict`, :func:`export_json`,
+:func:`estimator_from_dict`, :func:`estimator_from_json`): the estimator's parameters and fit
+information travel with the model.
 """
 
 import json
@@ -60,8 +65,10 @@ from dataclasses import dataclass
 from numbers import Integral
 
 import numpy as np
+from sklearn.utils.validation import check_is_fitted
 
-from ._hmm._emissions import make_emissions
+from ._core._compat import InvalidParameterError
+from ._hmm._emissions import emission_family
 from ._hmm._fitted import FittedHMMGMR, Standardization
 from ._hmm._gaussian import NotPositiveDefiniteError
 from ._hmm._stale_inputs import MAX_LAG, StaleInputNoise
@@ -118,7 +125,6 @@ def to_dict(model, *, estimator_params=None, fit_info=None, output_names=None):
     estimator_params = dict(estimator_params or {})
     if not isinstance(estimator_params.get("random_state"), Integral | None):
         estimator_params["random_state"] = None
-    data_emissions = model.data_emissions
     data = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
@@ -140,16 +146,12 @@ def to_dict(model, *, estimator_params=None, fit_info=None, output_names=None):
             "start_probabilities": model.startprob,
             "transition_matrix": model.transmat,
             "input_means": gmr.gating.means,
-            "input_precision_cholesky": gmr.gating.precisions_chol,
+            "input_precision_cholesky": gmr.gating.whitening(),
             "regression_coefficients": gmr.coef,
             "regression_intercepts": gmr.intercept,
             "conditional_covariances": gmr.conditional_covariances,
         },
-        "joint": {
-            "covariance_type": model.covariance_type,
-            "means": data_emissions.means,
-            "covariances": data_emissions.full_covariances,
-        },
+        "joint": model.data_emissions.portable_joint(),
         "estimator_params": estimator_params,
         "fit_info": dict(fit_info or {}),
     }
@@ -215,6 +217,46 @@ FIT_INFO_KEYS = (
     "n_iter",
     "converged",
 )
+
+
+_HISTORIES = ("log_likelihood_history", "penalized_log_likelihood_history")
+
+
+def estimator_to_dict(estimator, *, output_names=None):
+    """:func:`to_dict` of a fitted estimator's ``model_``, with its ``get_params()`` and
+    fit information (:data:`FIT_INFO_KEYS`, the attributes ``name + "_"``)."""
+    check_is_fitted(estimator)
+    return to_dict(
+        estimator.model_,
+        estimator_params=estimator.get_params(),
+        fit_info={key: getattr(estimator, key + "_", None) for key in FIT_INFO_KEYS},
+        output_names=output_names,
+    )
+
+
+def estimator_from_dict(cls, data):
+    """A fitted estimator of class ``cls`` restored from :func:`to_dict` output: its
+    ``from_fitted_model`` with the stored parameters, then the stored fit information."""
+    portable = read_model(data)
+    try:
+        estimator = cls.from_fitted_model(portable.model, **portable.estimator_params)
+    except InvalidParameterError as exc:
+        raise ValueError(f"'estimator_params' holds a value fit refuses: {exc}") from exc
+    except TypeError as exc:
+        raise ValueError(f"'estimator_params' holds an unknown parameter: {exc}") from exc
+    for key, value in portable.fit_info.items():
+        setattr(estimator, key + "_", np.asarray(value, float) if key in _HISTORIES else value)
+    return estimator
+
+
+def estimator_from_json(cls, path):
+    """A fitted estimator of class ``cls`` restored from a model file (its ``from_dict``);
+    an error names the file."""
+    data = load_json(path)
+    try:
+        return cls.from_dict(data)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from exc
 
 
 @dataclass(frozen=True)
@@ -326,18 +368,18 @@ def _stale_noise(block, n_inputs):
 
 
 def _joint_emissions(block, joint):
-    covariance_type = block.get("covariance_type", "full")
-    covariances = joint["covariances"]
-    if covariance_type == "tied":
-        if not np.allclose(covariances, covariances[0], rtol=1e-12, atol=0):
-            raise ValueError("'joint.covariances' must all be equal for covariance_type 'tied'")
-        covariances = covariances[0]
+    """The emission model of the ``joint`` block: its family checks that the covariances
+    have its form."""
     try:
-        return make_emissions(covariance_type, joint["means"], covariances)
+        family = emission_family(block.get("covariance_type", "full"))
+    except ValueError as exc:
+        raise ValueError(f"'joint.covariance_type': {exc}") from exc
+    try:
+        return family.from_state_covariances(joint["means"], joint["covariances"])
     except NotPositiveDefiniteError as exc:
         raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
     except ValueError as exc:
-        raise ValueError(f"'joint.covariance_type': {exc}") from exc
+        raise ValueError(f"'joint.covariances' {exc}") from exc
 
 
 def _check_joint_covariances(covariances):
@@ -435,7 +477,7 @@ def _check_filter_matches_joint(filtering, model):
     gmr = model.gmr
     for key, value in [
         ("input_means", gmr.gating.means),
-        ("input_precision_cholesky", gmr.gating.precisions_chol),
+        ("input_precision_cholesky", gmr.gating.whitening()),
         ("regression_coefficients", gmr.coef),
         ("regression_intercepts", gmr.intercept),
         ("conditional_covariances", gmr.conditional_covariances),

@@ -31,6 +31,13 @@ def random_emissions(rng, covariance_type, n_states=3, n_dims=4):
     return FAMILIES[covariance_type](means, full if covariance_type == "full" else full[0])
 
 
+def random_statistics(rng, n_states=3, n_dims=4, n_rows=200):
+    X = rng.normal(size=(n_rows, n_dims)) + 0.5
+    resp = rng.dirichlet(np.ones(n_states), size=n_rows)
+    shift = X.mean(axis=0)
+    return X, resp, MomentStatistics(*weighted_moments(resp, X, shift), shift)
+
+
 def make_switching_data(n_recordings=3, length=200, seed=0):
     rng = np.random.default_rng(seed)
     X_parts, y_parts = [], []
@@ -97,6 +104,95 @@ def test_rescaled_and_standardized_are_inverse(covariance_type):
     back = emissions.rescaled(center, scale).standardized(center, scale)
     np.testing.assert_allclose(back.means, emissions.means, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(back.covariances, emissions.covariances, rtol=1e-12)
+
+
+@pytest.mark.parametrize("covariance_type", ["full", "tied"])
+def test_map_adaptation_of_the_covariances_follows_the_plain_rule(covariance_type):
+    """``S' = (scatter(mu') + r (S0 + (mu0 - mu')(mu0 - mu')^T)) / (n + r)`` per state (tied:
+    the scatters of all states plus ``r S0`` over ``N + r``), ``reg_covar`` on the diagonal."""
+    rng = np.random.default_rng(4)
+    prior = random_emissions(rng, covariance_type)
+    X, resp, statistics = random_statistics(rng)
+    means = prior.means + rng.normal(scale=0.3, size=prior.means.shape)
+    relevance, reg_covar = 5.0, 1e-3
+    adapted = prior.map_adapted(statistics, means, relevance, reg_covar)
+    scatter = [
+        sum(r * np.outer(x - means[k], x - means[k]) for r, x in zip(resp[:, k], X, strict=True))
+        for k in range(3)
+    ]
+    counts = resp.sum(axis=0)
+    if covariance_type == "full":
+        expected = np.array(
+            [
+                (scatter[k] + relevance * (s0 + np.outer(m0 - m, m0 - m))) / (counts[k] + relevance)
+                for k, (s0, m0, m) in enumerate(
+                    zip(prior.covariances, prior.means, means, strict=True)
+                )
+            ]
+        )
+    else:
+        expected = (sum(scatter) + relevance * prior.covariances) / (counts.sum() + relevance)
+    expected = expected + reg_covar * np.eye(4)
+    assert type(adapted) is type(prior)
+    np.testing.assert_array_equal(adapted.means, means)
+    np.testing.assert_allclose(adapted.covariances, expected, rtol=1e-10)
+    assert np.array_equal(adapted.covariances, np.swapaxes(adapted.covariances, -1, -2))
+
+
+@pytest.mark.parametrize("covariance_type", ["full", "tied"])
+def test_the_conditioning_quantities_are_those_of_the_covariances(covariance_type):
+    rng = np.random.default_rng(5)
+    emissions = random_emissions(rng, covariance_type)
+    covariances = emissions.state_covariances()
+    inverses = np.linalg.inv(covariances)
+    deviations = rng.normal(size=(3, 7, 4))
+    np.testing.assert_allclose(emissions.precisions(), inverses, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(
+        emissions.precision_times(deviations), deviations @ inverses, rtol=1e-10, atol=1e-12
+    )
+    np.testing.assert_allclose(
+        emissions.mahalanobis(deviations),
+        np.einsum("knd,kde,kne->kn", deviations, inverses, deviations),
+        rtol=1e-10,
+    )
+    np.testing.assert_allclose(
+        emissions.half_log_det_precision(), -0.5 * np.linalg.slogdet(covariances)[1], rtol=1e-12
+    )
+    whitening = emissions.whitening()
+    np.testing.assert_array_equal(whitening, np.triu(whitening))
+    np.testing.assert_allclose(whitening @ whitening.transpose(0, 2, 1), inverses, rtol=1e-10)
+    np.testing.assert_array_equal(
+        emissions.state_variances(), np.diagonal(covariances, axis1=1, axis2=2)
+    )
+
+
+@pytest.mark.parametrize("covariance_type", ["full", "tied"])
+def test_the_exchange_forms_give_the_same_model_back(covariance_type):
+    rng = np.random.default_rng(6)
+    emissions = random_emissions(rng, covariance_type)
+    joint = emissions.portable_joint()
+    assert joint["covariance_type"] == covariance_type
+    assert joint["covariances"].shape == (3, 4, 4)  # every state's, whatever the family
+    family = emission_family(joint["covariance_type"])
+    back = family.from_state_covariances(joint["means"], joint["covariances"])
+    assert type(back) is type(emissions)
+    np.testing.assert_array_equal(back.covariances, emissions.covariances)
+    np.testing.assert_array_equal(back.whitening(), emissions.whitening())
+    covars = emissions.hmmlearn_covars()  # hmmlearn's setter takes the family's own shape
+    np.testing.assert_array_equal(covars, emissions.covariances)
+    assert not np.shares_memory(covars, emissions.covariances)
+    moved = emissions.with_means(emissions.means + 1.0)
+    assert type(moved) is type(emissions)
+    np.testing.assert_array_equal(moved.covariances, emissions.covariances)
+    frozen = emissions.frozen()
+    assert not (frozen.means.flags.writeable or frozen.covariances.flags.writeable)
+    np.testing.assert_array_equal(frozen.precisions(), emissions.precisions())
+
+
+def test_a_tied_model_refuses_unequal_state_covariances():
+    emissions = random_emissions(np.random.default_rng(7), "full")
+    with pytest.raises(ValueError, match="must all be equal for covariance_type 'tied'"):
+        TiedCovariance.from_state_covariances(emissions.means, emissions.covariances)
 
 
 def plain_tied_objective(resp, X, means, covariance, prior_scale):
@@ -200,6 +296,35 @@ def test_fit_filter_stream_and_json_agree_for_both_families(data, fitted, tmp_pa
     np.testing.assert_array_equal(restored.predict(X, groups=groups), predicted)
     if fitted.covariance_type == "tied":
         np.testing.assert_allclose(fitted.covars_, np.broadcast_to(fitted.covars_[0], (3, 3, 3)))
+
+
+def test_adapted_models_of_both_families_export_and_stream_exactly(data, fitted):
+    """Adaptation (means, covariances, transitions, batch and online) keeps the family, and
+    the adapted models go through JSON and hmmlearn and back bit for bit."""
+    from skhmmgmr._hmm._hmmlearn import from_hmmlearn
+
+    X, y, groups = data
+    first = groups == groups[0]
+    adapted = HMMGMRRegressor.from_fitted_model(fitted.model_, **fitted.get_params())
+    adapted.adapt(X[first], y[first] + 0.5, relevance=4.0, parameters="mvt")
+    assert adapted.covariance_type == fitted.covariance_type
+    assert not np.allclose(adapted.covars_, fitted.covars_)
+    predicted = adapted.predict(X, groups=groups)
+    restored = HMMGMRRegressor.from_dict(json.loads(json.dumps(adapted.to_dict())))
+    np.testing.assert_array_equal(restored.predict(X, groups=groups), predicted)
+    np.testing.assert_array_equal(restored.covars_, adapted.covars_)
+    back = from_hmmlearn(adapted.to_hmmlearn())
+    np.testing.assert_array_equal(back.data_emissions.means, adapted.means_)
+    np.testing.assert_array_equal(back.data_emissions.state_covariances(), adapted.covars_)
+    stream = fitted.filter_stream(relevance=8.0)
+    for row, target in zip(X[first][:50], y[first][:50], strict=True):
+        stream.update(row, target=target)
+    online = stream.adapted_model()
+    assert online.covariance_type == fitted.covariance_type
+    np.testing.assert_allclose(
+        online.emissions.covariances, fitted.model_.emissions.covariances, rtol=1e-14
+    )
+    assert not np.allclose(online.emissions.means, fitted.model_.emissions.means)
 
 
 def test_a_tied_file_with_unequal_covariances_is_refused(data):

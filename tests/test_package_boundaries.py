@@ -1,6 +1,6 @@
 """The package's boundaries, read from its source: who may touch what is private.
 
-Two rules, checked by walking the abstract syntax tree of every module of the package:
+Three rules, checked by walking the abstract syntax tree of every module of the package:
 
 - scikit-learn's private API (a ``_``-prefixed module or name) is imported by
   ``_core/_compat.py`` only, so a change in a scikit-learn release is dealt with in one place;
@@ -8,7 +8,16 @@ Two rules, checked by walking the abstract syntax tree of every module of the pa
   ``from .module import _name`` is allowed only in the module that defines ``_name`` (a name a
   module imports counts as defined there, so ``_core/_compat.py`` lends scikit-learn's names),
   or, for ``self._name``, in a subclass of a class whose module defines it (a protected hook, as
-  scikit-learn's ``_validate_params`` is to its estimators).
+  scikit-learn's ``_validate_params`` is to its estimators);
+- the emission model owns the form of the covariance: outside ``_hmm/_emissions.py`` (and the
+  pure numerical functions of ``_hmm/_gaussian.py``) no module compares anything with a
+  family's name (``"full"``, ``"tied"``...) or with a ``covariance_type``, names a family's
+  class, or reads a covariance or precision field (``.covariances``, ``.full_covariances``,
+  ``.precisions_chol``...): it asks the emission model's methods, so that a new family changes
+  one module.
+
+And one rule of ownership: the estimator's exporters (JSON, hmmlearn, stream) are one-line
+methods that call the module owning the format.
 
 Which layer may import which is ``tests/test_package_layers.py``'s rule.
 """
@@ -29,6 +38,22 @@ ALLOWED_PRIVATE_ACCESS: set[tuple[str, str]] = {
     # class's own constraints, as fit does: scikit-learn's convention for them is this name.
     ("_io.py", "_parameter_constraints"),
 }
+
+
+EMISSION_MODULES = {PACKAGE / "_hmm" / "_emissions.py", PACKAGE / "_hmm" / "_gaussian.py"}
+FAMILY_NAMES = {"full", "tied", "diag", "spherical"}
+FAMILY_CLASSES = {"FullCovariance", "TiedCovariance"}
+COVARIANCE_FIELDS = {
+    "covariances",
+    "full_covariances",
+    "precisions_chol",
+    "_precisions_chol",
+    "_distinct_precisions_chol",
+}
+
+# (module, what) pairs outside the emission model that may switch on the covariance form or
+# read its fields, each with its reason. None today: a new one needs a reason here.
+ALLOWED_COVARIANCE_FORM: dict[tuple[str, str], str] = {}
 
 
 def _is_private(name):
@@ -181,6 +206,127 @@ def test_no_module_reads_another_modules_private_state():
             owners = ", ".join(sorted(defined_in[name])) or "outside the package"
             offenders.append(f"{module}:{line}: {how} {name} (defined in {owners})")
     assert not offenders, "private state read across modules:\n" + "\n".join(offenders)
+
+
+def _covariance_form_uses(tree):
+    """(line, what) of every place that switches on the covariance form or reads its fields:
+    a comparison with a family's name or with a ``covariance_type``, a ``match`` case on a
+    family's name, a family's class named, a covariance or precision field read (also through
+    ``getattr`` with a constant name)."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare):
+            for operand in (node.left, *node.comparators):
+                if isinstance(operand, ast.Constant) and operand.value in FAMILY_NAMES:
+                    found.append((node.lineno, f"comparison with {operand.value!r}"))
+                elif isinstance(operand, ast.Attribute) and operand.attr == "covariance_type":
+                    found.append((node.lineno, "comparison with .covariance_type"))
+        elif isinstance(node, ast.MatchValue):
+            value = node.value
+            if isinstance(value, ast.Constant) and value.value in FAMILY_NAMES:
+                found.append((node.lineno, f"match case {value.value!r}"))
+        elif isinstance(node, ast.Attribute) and not isinstance(node.ctx, ast.Store):
+            if node.attr in COVARIANCE_FIELDS:
+                found.append((node.lineno, f"read of .{node.attr}"))
+            elif node.attr in FAMILY_CLASSES:
+                found.append((node.lineno, f"class {node.attr}"))
+        elif isinstance(node, ast.Name) and node.id in FAMILY_CLASSES:
+            found.append((node.lineno, f"class {node.id}"))
+        elif isinstance(node, ast.ImportFrom):
+            for alias in node.names:
+                if alias.name in FAMILY_CLASSES:
+                    found.append((node.lineno, f"class {alias.name}"))
+        elif (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Name)
+            and node.func.id in {"getattr", "hasattr"}
+            and len(node.args) > 1
+            and isinstance(node.args[1], ast.Constant)
+            and node.args[1].value in COVARIANCE_FIELDS
+        ):
+            found.append((node.lineno, f"read of .{node.args[1].value}"))
+    return found
+
+
+def test_only_the_emission_model_knows_the_covariance_form():
+    offenders = [
+        f"{_relative(path)}:{line}: {what}"
+        for path, tree in _trees().items()
+        if path not in EMISSION_MODULES
+        for line, what in _covariance_form_uses(tree)
+        if (_relative(path), what) not in ALLOWED_COVARIANCE_FORM
+    ]
+    assert not offenders, (
+        "the covariance form is switched on or read outside the emission model; ask a "
+        "method of GaussianEmissions (skhmmgmr/_hmm/_emissions.py) instead:\n"
+        + "\n".join(offenders)
+    )
+
+
+# The estimator's exporters and the module that owns each format.
+EXPORTER_OWNERS = {
+    "to_dict": "portable",
+    "export_json": "portable",
+    "from_dict": "portable",
+    "from_json": "portable",
+    "to_hmmlearn": "_hmm._hmmlearn",
+    "from_hmmlearn": "_hmm._hmmlearn",
+    "filter_stream": "streaming",
+}
+
+
+def test_the_estimators_exporters_are_one_line_delegations_to_their_owners():
+    """``HMMGMRRegressor``'s JSON, hmmlearn and stream methods hold their docstring and one
+    statement, a call of a name imported from the module that owns the format."""
+    path = PACKAGE / "estimator" / "_io.py"
+    tree = ast.parse(path.read_text())
+    imported = {
+        alias.asname or alias.name: node.module
+        for node in tree.body
+        if isinstance(node, ast.ImportFrom)
+        for alias in node.names
+    }
+    methods = {
+        node.name: node
+        for node in ast.walk(tree)
+        if isinstance(node, ast.FunctionDef) and node.name in EXPORTER_OWNERS
+    }
+    assert set(methods) == set(EXPORTER_OWNERS)
+    for name, method in methods.items():
+        body = method.body[1:] if ast.get_docstring(method) else method.body
+        assert len(body) == 1 and isinstance(body[0], ast.Return | ast.Expr), name
+        call = body[0].value
+        assert isinstance(call, ast.Call) and isinstance(call.func, ast.Name), name
+        owner = imported.get(call.func.id)
+        assert owner == EXPORTER_OWNERS[name], f"{name} calls {call.func.id} of {owner}"
+
+
+@pytest.mark.parametrize(
+    "source, expected",
+    [
+        (
+            'if emissions.covariance_type == "tied": pass',
+            ["comparison with .covariance_type", "comparison with 'tied'"],
+        ),
+        ("from ._emissions import FullCovariance", ["class FullCovariance"]),
+        ('x = "full" != kind', ["comparison with 'full'"]),
+        ("same = a.covariance_type is b.kind", ["comparison with .covariance_type"]),
+        ('match kind:\n    case "tied": pass', ["match case 'tied'"]),
+        ("s = emissions.covariances", ["read of .covariances"]),
+        ("s = model.data_emissions.full_covariances[0]", ["read of .full_covariances"]),
+        ("p = gating.precisions_chol", ["read of .precisions_chol"]),
+        ('p = getattr(gating, "precisions_chol")', ["read of .precisions_chol"]),
+        ("tied = isinstance(e, TiedCovariance)", ["class TiedCovariance"]),
+        # what stays allowed: a parameter's value passed on, a lookup by name, a method
+        ("family = emission_family(self.covariance_type)", []),
+        ('HMMGMRRegressor(covariance_type="tied")', []),
+        ("s = emissions.state_covariances()", []),
+        ("emissions.covariances = s", []),
+        ("v = params.conditional_covariances", []),
+    ],
+)
+def test_the_covariance_form_rule_sees_switches_and_field_reads(source, expected):
+    assert [what for _, what in _covariance_form_uses(ast.parse(source))] == expected
 
 
 @pytest.mark.parametrize(

@@ -86,7 +86,7 @@ class HMMParameters:
     @property
     def covariances(self):
         """Every state's full covariance, shape (n_states, n_dims, n_dims)."""
-        return self.emissions.full_covariances
+        return self.emissions.state_covariances()
 
 
 @dataclass

@@ -14,7 +14,22 @@ object; none of them does Gaussian algebra itself. An emission model provides
 - the number of free parameters (information criteria);
 - the GMR read-out: the gating density on the inputs and the conditional mean and covariance of
   the outputs given the inputs (:meth:`GaussianEmissions.condition`);
-- its change of units (:meth:`GaussianEmissions.rescaled`) and its portable dict form.
+- MAP adaptation with the model as the prior (:meth:`GaussianEmissions.map_adapted`, after
+  Reynolds, Quatieri and Dunn, 2000) and the same model over other means
+  (:meth:`GaussianEmissions.with_means`, the stream's adapted model);
+- what conditioning on the observed columns of a row needs (missing inputs): the precision
+  matrices, their product with deviations from the means, the squared Mahalanobis distances
+  and ``1/2 log det`` of the precisions, and the whitening matrices the portable filter block
+  stores;
+- every state's covariance matrix or variances (the read-outs that mix them, ``covars_``);
+- its change of units (:meth:`GaussianEmissions.rescaled`) and its exchange forms: the
+  ``joint`` block of the portable JSON file (:meth:`GaussianEmissions.portable_joint`,
+  :meth:`GaussianEmissions.from_state_covariances`) and hmmlearn's ``covars_``
+  (:meth:`GaussianEmissions.hmmlearn_covars`).
+
+No other module compares ``covariance_type`` with a family's name or reads the covariance or
+precision fields (``tests/test_package_boundaries.py`` checks it): a new family changes this
+module only.
 
 Two families are implemented: ``"full"`` (one full covariance per state) and ``"tied"`` (one
 full covariance shared by all states, as in :class:`sklearn.mixture.GaussianMixture`: the
@@ -219,6 +234,23 @@ class GaussianEmissions(ABC):
     def _with(self, means, full_covariances):
         """The same family over other means and (full) covariances."""
 
+    @abstractmethod
+    def _map_covariances(self, scatter, means, weights, relevance):
+        """The MAP covariances (family shape, before symmetrising) of :meth:`map_adapted`."""
+
+    @classmethod
+    @abstractmethod
+    def from_state_covariances(cls, means, covariances):
+        """The family over ``means`` and every state's covariance (n_states, n_dims, n_dims),
+        as the portable ``joint`` block and hmmlearn's ``covars_`` give them.
+
+        Raises
+        ------
+        ValueError
+            If the covariances do not have the family's form (tied: not all equal), with a
+            message that reads after the name of the covariances.
+        """
+
     # -- shared parts ------------------------------------------------------------------------
     def log_prior(self, prior):
         """Log-density of the prior at these parameters (each covariance matrix once)."""
@@ -226,6 +258,87 @@ class GaussianEmissions(ABC):
 
     def _distinct_precisions_chol(self):
         return self.precisions_chol
+
+    def with_means(self, means):
+        """The same covariances about other state ``means`` (n_states, n_dims)."""
+        return type(self)(means, self.covariances)
+
+    def frozen(self):
+        """A copy whose means and covariances are read-only."""
+        means, covariances = np.array(self.means), np.array(self.covariances)
+        means.flags.writeable = covariances.flags.writeable = False
+        return type(self)(means, covariances)
+
+    def map_adapted(self, statistics, means, relevance, reg_covar=0.0):
+        """MAP adaptation of the covariances with these parameters as the prior.
+
+        GMM-UBM speaker adaptation (Reynolds, Quatieri and Dunn, 2000): with the E-step's
+        ``statistics`` (:class:`MomentStatistics` of the new rows), the adapted state
+        ``means`` and the relevance factor ``r``, every covariance moves from its prior value
+        ``S0`` to ``S' = (scatter(mu') + r (S0 + (mu0 - mu')(mu0 - mu')^T)) / (n + r)`` (per
+        state; tied: the scatters of all states plus ``r S0`` over ``N + r``), then
+        ``reg_covar`` is added to its diagonal as fit's M-step does.
+
+        Returns
+        -------
+        emissions : GaussianEmissions
+            The same family over ``means`` and the adapted covariances.
+        """
+        scatter = statistics.scatter_about(means)
+        covariances = self._map_covariances(scatter, means, statistics.weights, relevance)
+        covariances = 0.5 * (covariances + np.swapaxes(covariances, -1, -2))
+        diagonal = np.einsum("...ii->...i", covariances)  # a writeable view
+        diagonal += reg_covar
+        return type(self)(means, covariances)
+
+    def state_covariances(self):
+        """Every state's covariance matrix, shape (n_states, n_dims, n_dims) (tied: the
+        shared one, repeated)."""
+        return self.full_covariances
+
+    def state_variances(self):
+        """Every state's variances (the diagonals of its covariance), (n_states, n_dims)."""
+        return np.diagonal(self.full_covariances, axis1=1, axis2=2)
+
+    def whitening(self):
+        """Every state's whitening matrix ``U_k`` (n_states, n_dims, n_dims): upper
+        triangular, ``inv(S_k) = U_k U_k^T``, so that ``(x - mu_k) @ U_k`` has the identity
+        covariance (the precision Cholesky factor the portable filter block stores)."""
+        return self.precisions_chol
+
+    def precisions(self):
+        """Every state's precision matrix ``L_k = inv(S_k)``, (n_states, n_dims, n_dims)."""
+        factors = self.precisions_chol
+        return factors @ factors.transpose(0, 2, 1)
+
+    def precision_times(self, deviations):
+        """``L_k d`` of deviations ``d`` (n_states, n_rows, n_dims) from every state's mean:
+        two batched products with the whitening matrices."""
+        factors = self.precisions_chol
+        return (deviations @ factors) @ factors.transpose(0, 2, 1)
+
+    def mahalanobis(self, deviations):
+        """Squared Mahalanobis distances ``d^T L_k d`` of deviations ``d`` (n_states,
+        n_rows, n_dims) from every state's mean, shape (n_states, n_rows)."""
+        return np.square(deviations @ self.precisions_chol).sum(axis=2)
+
+    def half_log_det_precision(self):
+        """``1/2 log det L_k = -1/2 log det S_k`` of every state, shape (n_states,)."""
+        return np.log(np.diagonal(self.precisions_chol, axis1=1, axis2=2)).sum(axis=1)
+
+    def portable_joint(self):
+        """The ``joint`` block of the portable model file (:mod:`skhmmgmr.portable`):
+        ``covariance_type``, ``means`` and every state's covariance (tied: repeated)."""
+        return {
+            "covariance_type": self.covariance_type,
+            "means": self.means,
+            "covariances": self.full_covariances,
+        }
+
+    def hmmlearn_covars(self):
+        """The covariances as ``hmmlearn.hmm.GaussianHMM`` stores them (what its
+        ``covars_`` setter takes): the family's own shape, a copy."""
+        return np.array(self.covariances)
 
     def density(self, shift=None):
         """Evaluator of the scaled emission likelihoods (:class:`GaussianDensity`) of columns
@@ -283,19 +396,6 @@ class GaussianEmissions(ABC):
     def log_normalizers(self):
         """``log det(P_k) - n_dims / 2 log(2 pi)`` of every state."""
         return log_det_cholesky(self.precisions_chol) - 0.5 * self.n_dims * np.log(2 * np.pi)
-
-    def to_dict(self):
-        """Plain dict: ``covariance_type``, ``means`` and ``covariances`` (family shape)."""
-        return {
-            "covariance_type": self.covariance_type,
-            "means": self.means.tolist(),
-            "covariances": self.covariances.tolist(),
-        }
-
-    @staticmethod
-    def from_dict(data):
-        """Emission from :meth:`to_dict` output."""
-        return make_emissions(data["covariance_type"], data["means"], data["covariances"])
 
 
 class FullCovariance(GaussianEmissions):
@@ -355,6 +455,17 @@ class FullCovariance(GaussianEmissions):
     def _with(self, means, full_covariances):
         return FullCovariance(means, full_covariances)
 
+    def _map_covariances(self, scatter, means, weights, relevance):
+        moved = self.means - means
+        prior_scatter = self.full_covariances + moved[:, :, np.newaxis] * moved[:, np.newaxis, :]
+        return (scatter + relevance * prior_scatter) / (weights + relevance)[
+            :, np.newaxis, np.newaxis
+        ]
+
+    @classmethod
+    def from_state_covariances(cls, means, covariances):
+        return cls(means, covariances)
+
 
 class TiedCovariance(GaussianEmissions):
     """One full covariance matrix shared by all states."""
@@ -411,6 +522,17 @@ class TiedCovariance(GaussianEmissions):
 
     def _with(self, means, full_covariances):
         return TiedCovariance(means, full_covariances[0])
+
+    def _map_covariances(self, scatter, means, weights, relevance):
+        total = scatter.sum(axis=0) + relevance * self.covariances
+        return total / (weights.sum() + relevance)
+
+    @classmethod
+    def from_state_covariances(cls, means, covariances):
+        covariances = np.asarray(covariances, dtype=float)
+        if not np.allclose(covariances, covariances[0], rtol=1e-12, atol=0):
+            raise ValueError("must all be equal for covariance_type 'tied'")
+        return cls(means, covariances[0])
 
 
 EMISSION_FAMILIES = {"full": FullCovariance, "tied": TiedCovariance}

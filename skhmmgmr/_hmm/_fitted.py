@@ -5,7 +5,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._em import HMMParameters
-from ._emissions import make_emissions
 from ._gmr import condition_on_inputs
 
 
@@ -184,15 +183,9 @@ class FittedHMMGMR:
         if self.stale_noise is not None:
             object.__setattr__(self, "stale_noise", self.stale_noise.frozen(self.n_inputs))
         # The model owns read-only copies: nobody can change it after the fact.
-        data_emissions = make_emissions(
-            self.data_emissions.covariance_type,
-            _frozen(self.data_emissions.means),
-            _frozen(self.data_emissions.covariances),
-        )
+        data_emissions = self.data_emissions.frozen()
         scaling = self.standardization
-        emissions = data_emissions.standardized(scaling.center, scaling.scale)
-        for array in (emissions.means, emissions.covariances):
-            array.flags.writeable = False
+        emissions = data_emissions.standardized(scaling.center, scaling.scale).frozen()
         object.__setattr__(self, "data_emissions", data_emissions)
         object.__setattr__(self, "emissions", emissions)
         object.__setattr__(self, "startprob", startprob)
@@ -237,7 +230,7 @@ class FittedHMMGMR:
         the data's units, shape (n_outputs,) each."""
         n_inputs = self.n_inputs
         means = self.emissions.means[:, n_inputs:]
-        variances = np.diagonal(self.emissions.full_covariances, axis1=1, axis2=2)[:, n_inputs:]
+        variances = self.emissions.state_variances()[:, n_inputs:]
         mean = self.startprob @ means
         std = np.sqrt(np.maximum(self.startprob @ (variances + (means - mean) ** 2), 0.0))
         return self.standardization.outputs(mean), self.standardization.output_std(std)

@@ -9,12 +9,14 @@ columns only (the standard missing-data EM for Gaussians). Under a state's Gauss
 - the missing columns have the conditional mean ``E[x_m | x_o] = mu_m + S_mo S_oo^-1 (x_o -
   mu_o)`` and the conditional covariance ``S_mm - S_mo S_oo^-1 S_om``.
 
-Both are computed row by row from the state's precision ``L = S^-1`` (its Cholesky factor is
-what the emission keeps), with no factorisation of ``S_oo`` per pattern of missing columns:
-the conditional covariance is ``(L_mm)^-1``, the conditional mean ``mu_m - (L_mm)^-1 L_mo
-(x_o - mu_o)``, ``log det S_oo = log det S + log det L_mm``, and the Mahalanobis distance of
-``x_o`` under ``S_oo`` is the full one of the row completed by its conditional mean (the
-minimum over ``x_m``), a sum of squares with no cancellation. Rows are grouped by their number
+Both are computed row by row from the state's precision ``L = S^-1``, with no factorisation
+of ``S_oo`` per pattern of missing columns: the conditional covariance is ``(L_mm)^-1``, the
+conditional mean ``mu_m - (L_mm)^-1 L_mo (x_o - mu_o)``, ``log det S_oo = log det S + log det
+L_mm``, and the Mahalanobis distance of ``x_o`` under ``S_oo`` is the full one of the row
+completed by its conditional mean (the minimum over ``x_m``), a sum of squares with no
+cancellation. The emission model gives what this needs whatever the form of its covariances
+(:meth:`~skhmmgmr._hmm._emissions.GaussianEmissions.precisions`, ``precision_times``,
+``mahalanobis``, ``half_log_det_precision``). Rows are grouped by their number
 ``r`` of missing columns only: each group costs a few batched products and ``r x r``
 inversions, whatever the patterns of missing columns.
 
@@ -74,12 +76,10 @@ def condition_rows(emissions, x, missing, shift=None, stale=None):
     block of the precision gains ``1 / v`` on the diagonal and its completion is the Kalman
     update of the conditional mean by the carried value.
     """
-    precisions_chol = emissions.precisions_chol  # P, with S^-1 = P P^T
     centres = emissions.means if shift is None else emissions.means - shift
     deltas = np.where(missing, 0.0, x[np.newaxis] - centres[:, np.newaxis, :])  # d = x - mu
-    # L d for every row and state, L = P P^T: two batched products with the factor.
-    gradients = (deltas @ precisions_chol) @ precisions_chol.transpose(0, 2, 1)
-    precisions = precisions_chol @ precisions_chol.transpose(0, 2, 1)
+    gradients = emissions.precision_times(deltas)  # L d for every row and state, L = S^-1
+    precisions = emissions.precisions()
     n_missing = missing.sum(axis=1)
     log_det_missing = np.zeros(deltas.shape[:2])
     n_seen = missing.shape[1] - n_missing  # observed values, carried ones included
@@ -110,10 +110,10 @@ def condition_rows(emissions, x, missing, shift=None, stale=None):
         # x_hat_m - mu_m = -(L_mm)^-1 L_mo d_o, and L_mo d_o = (L d)_m while d_m = 0
         deltas[:, rows[:, np.newaxis], columns] = -shifts[..., 0]
         groups.append((rows, columns, covariances))
-    distances = np.square(deltas @ precisions_chol).sum(axis=2)  # completed: x_o's own
+    distances = emissions.mahalanobis(deltas)  # completed: x_o's own
     if stale is not None:  # and the carried values' distance to the completion
         distances += np.sum(weights * np.square(stale_deltas - deltas), axis=2)
-    log_det = np.log(np.diagonal(precisions_chol, axis1=1, axis2=2)).sum(axis=1)
+    log_det = emissions.half_log_det_precision()
     log_prob = log_det[:, np.newaxis] - 0.5 * (distances + log_det_missing + n_seen * LOG_2PI)
     # From x_hat - mu to x_hat - x: x is zero in the missing columns, d in the observed ones.
     deltas = np.where(missing, deltas + centres[:, np.newaxis, :], 0.0)

@@ -36,7 +36,6 @@ from .._core._validation import (
 )
 from .._hmm._em import HMMParameters, e_step
 from .._hmm._em_data import Columns, EStepData
-from .._hmm._emissions import make_emissions
 from .._hmm._fitted import FittedHMMGMR
 from .._hmm._gaussian import NotPositiveDefiniteError
 from .._hmm._gmr import filter_state_probabilities, gmr_estimates, mix_estimates
@@ -65,21 +64,6 @@ def map_step(stats, prior, relevance, parameters, reg_covar=0.0):
     if "m" in parameters:
         sums = weights[:, np.newaxis] * emission.shift + emission.first
         means = (sums + relevance * old.means) / (weights + relevance)[:, np.newaxis]
-    covariances = old.covariances
-    if "v" in parameters:
-        scatter = emission.scatter_about(means)
-        moved = old.means - means
-        prior_scatter = old.full_covariances + moved[:, :, np.newaxis] * moved[:, np.newaxis, :]
-        if old.covariance_type == "tied":
-            total = scatter.sum(axis=0) + relevance * old.covariances
-            covariances = total / (weights.sum() + relevance)
-        else:
-            covariances = (scatter + relevance * prior_scatter) / (weights + relevance)[
-                :, np.newaxis, np.newaxis
-            ]
-        covariances = 0.5 * (covariances + np.swapaxes(covariances, -1, -2))
-        diagonal = np.einsum("...ii->...i", covariances)  # a writeable view
-        diagonal += reg_covar
     startprob, transmat = prior.startprob, prior.transmat
     if "t" in parameters:
         starts = stats.start_counts + relevance * prior.startprob
@@ -87,7 +71,10 @@ def map_step(stats, prior, relevance, parameters, reg_covar=0.0):
         counts = stats.transition_counts + relevance * prior.transmat
         transmat = counts / counts.sum(axis=1, keepdims=True)
     try:
-        emissions = make_emissions(old.covariance_type, means, covariances)
+        if "v" in parameters:
+            emissions = old.map_adapted(emission, means, relevance, reg_covar)
+        else:
+            emissions = old.with_means(means)
     except NotPositiveDefiniteError as exc:
         raise ValueError(
             f"adapt: {exc.args[0].split(';')[0]} after adaptation with relevance={relevance:g}: "
@@ -351,9 +338,8 @@ def marginal_estimates(ahead, model, return_std=False):
     """Mix every state's output mean and marginal covariance (standardised units) with the
     state probabilities ``ahead``."""
     n_inputs = model.n_inputs
-    covariances = model.emissions.full_covariances[:, n_inputs:, n_inputs:]
-    state_means = np.broadcast_to(
-        model.emissions.means[:, n_inputs:], (ahead.shape[0], *covariances.shape[:2])
-    )
+    outputs = model.emissions.marginal(np.arange(n_inputs, model.emissions.n_dims))
+    covariances = outputs.state_covariances()
+    state_means = np.broadcast_to(outputs.means, (ahead.shape[0], *covariances.shape[:2]))
     params = replace(model.gmr, conditional_covariances=covariances)
     return mix_estimates(ahead, state_means, params, return_std=return_std)

@@ -1,13 +1,17 @@
-"""Model input and output of :class:`~skhmmgmr.HMMGMRRegressor`: the fitted-model object,
-streaming, the portable JSON format and hmmlearn."""
+"""Model input and output of :class:`~skhmmgmr.HMMGMRRegressor`.
+
+The estimator's own constructor from a :class:`~skhmmgmr.FittedHMMGMR` lives here; every
+exporter lives with its owner and the estimator's method is one line that delegates: the
+portable JSON format to :mod:`skhmmgmr.portable`, hmmlearn to :mod:`skhmmgmr._hmm._hmmlearn`,
+the stream to :class:`~skhmmgmr.FilterStream`.
+"""
 
 import numpy as np
-from sklearn.utils.validation import check_is_fitted
 
-from .._core._compat import InvalidParameterError, validate_parameter_constraints
-from ..portable import FIT_INFO_KEYS, export_json, load_json, read_model, to_dict
-
-_HISTORIES = ("log_likelihood_history", "penalized_log_likelihood_history")
+from .._core._compat import validate_parameter_constraints
+from .._hmm._hmmlearn import estimator_from_hmmlearn, estimator_to_hmmlearn
+from ..portable import estimator_from_dict, estimator_from_json, estimator_to_dict, export_json
+from ..streaming import FilterStream
 
 
 class ModelIOMixin:
@@ -53,21 +57,6 @@ class ModelIOMixin:
         return estimator
 
     @classmethod
-    def _from_portable(cls, portable):
-        try:
-            estimator = cls.from_fitted_model(portable.model, **portable.estimator_params)
-        except InvalidParameterError as exc:
-            raise ValueError(f"'estimator_params' holds a value fit refuses: {exc}") from exc
-        except TypeError as exc:
-            raise ValueError(f"'estimator_params' holds an unknown parameter: {exc}") from exc
-        for key, value in portable.fit_info.items():
-            setattr(estimator, key + "_", np.asarray(value, float) if key in _HISTORIES else value)
-        return estimator
-
-    def _fit_info(self):
-        return {key: getattr(self, key + "_", None) for key in FIT_INFO_KEYS}
-
-    @classmethod
     def from_hmmlearn(cls, hmm, *, n_outputs=1, feature_names=None, **params):
         """A fitted estimator that reads out a fitted ``hmmlearn.hmm.GaussianHMM`` by causal GMR.
 
@@ -102,10 +91,9 @@ class ModelIOMixin:
         >>> model.predict(X).shape
         (300,)
         """
-        from .._hmm._hmmlearn import from_hmmlearn
-
-        model = from_hmmlearn(hmm, n_outputs=n_outputs, feature_names=feature_names)
-        return cls.from_fitted_model(model, **params)
+        return estimator_from_hmmlearn(
+            cls, hmm, n_outputs=n_outputs, feature_names=feature_names, **params
+        )
 
     def to_hmmlearn(self):
         """The fitted HMM as a fitted ``hmmlearn.hmm.GaussianHMM`` over ``[inputs, outputs]``.
@@ -128,10 +116,7 @@ class ModelIOMixin:
         >>> bool(np.isclose(hmm.score(np.column_stack([X, y])), model.log_likelihood(X, y)))
         True
         """
-        from .._hmm._hmmlearn import to_hmmlearn
-
-        check_is_fitted(self)
-        return to_hmmlearn(self.model_)
+        return estimator_to_hmmlearn(self)
 
     def filter_stream(self, **kwargs):
         """Sample-by-sample causal filter for real-time use.
@@ -158,9 +143,6 @@ class ModelIOMixin:
         >>> bool(abs(stream.update(X[0]) - model.predict(X[:1])[0]) < 1e-12)
         True
         """
-        from ..streaming._filter import FilterStream
-
-        check_is_fitted(self)
         return FilterStream(self, **kwargs)
 
     def to_dict(self, *, output_names=None):
@@ -190,13 +172,7 @@ class ModelIOMixin:
         >>> bool(np.array_equal(restored.predict(X), model.predict(X)))
         True
         """
-        check_is_fitted(self)
-        return to_dict(
-            self.model_,
-            estimator_params=self.get_params(),
-            fit_info=self._fit_info(),
-            output_names=output_names,
-        )
+        return estimator_to_dict(self, output_names=output_names)
 
     def export_json(self, path, *, output_names=None):
         """Write the portable model file (strict JSON) to ``path``.
@@ -233,7 +209,7 @@ class ModelIOMixin:
             inconsistent parameters, or is of another format version; the message names the
             key.
         """
-        return cls._from_portable(read_model(data))
+        return estimator_from_dict(cls, data)
 
     @classmethod
     def from_json(cls, path):
@@ -253,8 +229,4 @@ class ModelIOMixin:
             If the file is not valid JSON or not a valid model file (see :meth:`from_dict`);
             the message names the file and the key.
         """
-        data = load_json(path)
-        try:
-            return cls.from_dict(data)
-        except ValueError as exc:
-            raise ValueError(f"{path}: {exc}") from exc
+        return estimator_from_json(cls, path)

@@ -349,7 +349,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
     @property
     def covars_(self):
         check_is_fitted(self)
-        return np.array(self.model_.data_emissions.full_covariances)
+        return np.array(self.model_.data_emissions.state_covariances())
 
     def predict_state_proba(self, X, groups=None, time=None):
         """Filtered state probabilities ``alpha_t,k`` given the inputs up to each row.

@@ -28,7 +28,6 @@ import math
 import numpy as np
 
 from .._core._validation import check_adaptation_params
-from .._hmm._emissions import make_emissions
 from .._hmm._fitted import FittedHMMGMR
 from .._hmm._gmr import condition_on_inputs
 
@@ -143,12 +142,10 @@ class OnlineMeans:
         model = self.model
         if self.n_learned == 0:
             return model
-        emissions = model.emissions
-        adapted = make_emissions(emissions.covariance_type, self.means(), emissions.covariances)
         return FittedHMMGMR.from_standardized(
             model.startprob,
             model.transmat,
-            adapted,
+            model.emissions.with_means(self.means()),
             model.standardization,
             scalar_output=model.scalar_output,
             feature_names=model.feature_names,
@@ -159,7 +156,5 @@ class OnlineMeans:
         """GMR read-out of the adapted means (standardised units), for samples with missing
         inputs."""
         model = self.model
-        emissions = make_emissions(
-            model.emissions.covariance_type, self.means(), model.emissions.covariances
-        )
+        emissions = model.emissions.with_means(self.means())
         return condition_on_inputs(model.startprob, model.transmat, emissions, model.n_inputs)

@@ -144,8 +144,12 @@ class FilterStream:
         relevance=None,
         forgetting=1.0,
     ):
+        estimator = None if isinstance(model, FittedHMMGMR) else model
+        if estimator is not None:  # a fitted estimator first, as its other methods check
+            check_is_fitted(estimator)
+            model = estimator.model_
         if missing_values is None:
-            missing_values = getattr(model, "missing_values", "error")
+            missing_values = getattr(estimator, "missing_values", "error")
         if missing_values not in MISSING_VALUES:
             raise ValueError(
                 f"missing_values must be one of {MISSING_VALUES}, got {missing_values!r}"
@@ -153,9 +157,6 @@ class FilterStream:
         self.missing_values = missing_values
         self._marginalize = missing_values != "error"
         self.relevance, self.forgetting = check_adaptation(relevance, forgetting)
-        if not isinstance(model, FittedHMMGMR):
-            check_is_fitted(model)
-            model = model.model_
         self._model = model
         self._carried = carried_inputs(model, missing_values)
         params, scaling = model.gmr, model.standardization
