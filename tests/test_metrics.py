@@ -1,3 +1,4 @@
+import functools
 import pickle
 import warnings
 
@@ -630,3 +631,32 @@ def test_sequential_feature_selector_routes_groups():
     assert len(SpyScore.received) == 4  # 2 candidate features x 2 folds
     for received in SpyScore.received:
         assert received is not None and len(pd.unique(received)) == 3
+
+
+def test_a_scorer_predicts_a_routing_pipeline_once(monkeypatch):
+    """#34: on a Pipeline the scorers fell back to one predict call per recording (24 calls on
+    24 recordings), also with metadata routing on, where the Pipeline routes groups."""
+    from skhmmgmr import HMMGMRRegressor, PerformanceScore
+
+    rng = np.random.default_rng(3)
+    X = np.cumsum(rng.normal(scale=0.2, size=(480, 2)), axis=0)
+    y = np.tanh(X[:, 0]) + 0.1 * X[:, 1]
+    groups = np.repeat(np.arange(24), 20)
+    scorer = PerformanceScore(0.5, 0.5, sampling_period=0.05)
+    reference = PerformanceScore(0.5, 0.5, sampling_period=0.05, predict_mode="per_recording")
+    calls = []
+    original = HMMGMRRegressor.predict
+
+    @functools.wraps(original)  # keeps the signature that metadata routing reads
+    def counted(self, *args, **kwargs):
+        calls.append(1)
+        return original(self, *args, **kwargs)
+
+    with config_context(enable_metadata_routing=True):
+        pipe = make_pipeline(StandardScaler(), HMMGMRRegressor(n_states=2, random_state=0))
+        pipe.fit(X, y, groups=groups)
+        monkeypatch.setattr(HMMGMRRegressor, "predict", counted)
+        once = scorer(pipe, X, y, groups=groups)
+        assert len(calls) == 1
+        assert once == pytest.approx(reference(pipe, X, y, groups=groups), abs=1e-12)
+        assert len(calls) == 1 + 24

@@ -208,6 +208,14 @@ class _RecordingScorer(_MetadataRequester):
 
 
 def _predict_takes_groups(estimator):
+    """Whether ``estimator.predict`` takes ``groups``: as a parameter of its own, or, with
+    metadata routing on, as metadata it routes to a step that requests it (a Pipeline)."""
+    if _routing_enabled() and hasattr(estimator, "get_metadata_routing"):
+        try:
+            if "groups" in get_routing_for_object(estimator).consumes("predict", ["groups"]):
+                return True
+        except (AttributeError, TypeError, ValueError):
+            pass
     try:
         parameters = inspect.signature(estimator.predict).parameters
     except (TypeError, ValueError):
