@@ -25,14 +25,8 @@ from dataclasses import replace
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
-from .._core._panel import align_target, read_row_order
-from .._core._sequences import as_recordings
 from .._core._validation import (
     check_adaptation_params,
-    check_finite,
-    check_target_finite,
-    column_names_of,
-    validate_joint,
 )
 from .._hmm._em import HMMParameters, e_step
 from .._hmm._em_data import Columns, EStepData
@@ -40,7 +34,7 @@ from .._hmm._fitted import FittedHMMGMR
 from .._hmm._gaussian import NotPositiveDefiniteError
 from .._hmm._gmr import filter_state_probabilities, gmr_estimates, mix_estimates
 from .._hmm._missing import observed_counts
-from ._prediction_inputs import read_inputs
+from ._prediction_inputs import read_inputs, read_joint_inputs
 
 ADAPTED_PARAMETERS = frozenset("mvt")
 
@@ -185,25 +179,8 @@ class AdaptMixin:
                     "they must describe the same rows."
                 )
             return self
-        y = align_target(X, y)
-        rows = read_row_order(X, groups, time)
-        X, y, groups = rows.to_filter_order(X), rows.to_filter_order(y), rows.groups
-        allow_nan = self.missing_values != "error"
-        check_target_finite(y, groups, allow_nan=allow_nan)
-        X, y = validate_joint(
-            self,
-            X,
-            y,
-            allow_nan=allow_nan,
-            reset=False,
-            ensure_all_finite="allow-nan" if allow_nan else True,
-        )
-        Y = y.reshape(-1, 1) if y.ndim == 1 else y
-        if Y.shape[1] != self.model_.n_outputs:
-            raise ValueError(f"y has {Y.shape[1]} outputs, the model {self.model_.n_outputs}")
-        recordings = as_recordings(groups, X.shape[0], time=rows.time)
-        names = column_names_of(self, X.shape[1])
-        check_finite(X, name="X", column_names=names, recordings=recordings, allow_nan=allow_nan)
+        inputs = read_joint_inputs(self, X, y, groups, time, fitting=False)
+        X, Y, recordings = inputs.X, inputs.Y, inputs.recordings
         model = self.model_
         scaling = model.standardization
         columns = Columns.from_rows(scaling.joint(X, Y))

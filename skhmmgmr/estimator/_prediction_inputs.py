@@ -1,13 +1,23 @@
-"""The inputs of a prediction: the rows in filter order, their recordings, the standardised
-values, and the rows that miss a value (read once for the filter and the read-out)."""
+"""The inputs of the estimator's methods, each read by one reader: :func:`read_joint_inputs`
+for the methods that read inputs and outputs (fit, adapt, log_likelihood), :func:`read_inputs`
+for those that read inputs only (predict and the filter's other read-outs): the rows in filter
+order, their recordings, the validated values, and for a prediction the standardised inputs
+and the rows that miss a value (read once for the filter and the read-out)."""
 
 import warnings
+from dataclasses import dataclass
 
+import numpy as np
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._core._panel import read_row_order
+from .._core._panel import align_target, read_row_order
 from .._core._sequences import as_recordings
-from .._core._validation import check_finite, column_names_of
+from .._core._validation import (
+    check_finite,
+    check_target_finite,
+    column_names_of,
+    validate_joint,
+)
 from .._hmm._gmr import read_missing
 from .._hmm._stale_inputs import stale_noise_for
 
@@ -32,6 +42,53 @@ def read_inputs(estimator, X, groups, time):
     standardized = model.standardization.inputs(X)
     noise = stale_noise_for(model, estimator.missing_values)
     return standardized, recordings, rows, read_missing(standardized, recordings, noise)
+
+
+@dataclass(frozen=True)
+class JointInputs:
+    """Inputs and outputs of one call, validated, in filter order, with their recordings."""
+
+    X: np.ndarray
+    Y: np.ndarray  # always 2-D
+    scalar_output: bool  # whether y was 1-D
+    recordings: object  # skhmmgmr._core._sequences.Recordings
+    grouped: bool  # whether the recordings were given (groups or a recording index)
+    input_names: list
+    output_names: list
+
+
+def read_joint_inputs(estimator, X, y, groups, time, *, fitting):
+    """Read ``X`` and ``y`` of ``fit`` (``fitting=True``: the recordings in order of their
+    ids, the estimator's input attributes set, at least two rows per recording) or of a
+    method of the fitted estimator (``adapt``, ``log_likelihood``: checked against what fit
+    saw, one output count, a warning for many rows without recordings).
+
+    A ``y`` with an index is paired with a panel ``X`` by label; a NaN target is refused
+    unless the estimator reads missing values, naming the column and recording, as is a NaN
+    or infinite input.
+    """
+    y = align_target(X, y)
+    rows = read_row_order(X, groups, time, sort_recordings=fitting, sort_groups=fitting)
+    X, y, groups = rows.to_filter_order(X), rows.to_filter_order(y), rows.groups
+    allow_nan = estimator.missing_values != "error"
+    check_target_finite(y, groups, allow_nan=allow_nan)
+    X, y = validate_joint(estimator, X, y, allow_nan=allow_nan, reset=fitting)
+    Y = y.reshape(-1, 1) if y.ndim == 1 else y
+    if not fitting and Y.shape[1] != estimator.model_.n_outputs:
+        raise ValueError(f"y has {Y.shape[1]} outputs, the model {estimator.model_.n_outputs}")
+    if groups is None:
+        if fitting:
+            warn_if_fitted_as_one_recording(X.shape[0])
+        else:
+            warn_if_one_long_recording(estimator, X.shape[0])
+    recordings = as_recordings(groups, X.shape[0], time=rows.time, min_length=2 if fitting else 1)
+    input_names = column_names_of(estimator, X.shape[1])
+    output_names = [f"output {i}" for i in range(Y.shape[1])]
+    for values, name, names in ((X, "X", input_names), (Y, "y", output_names)):
+        check_finite(
+            values, name=name, column_names=names, recordings=recordings, allow_nan=allow_nan
+        )
+    return JointInputs(X, Y, y.ndim == 1, recordings, groups is not None, input_names, output_names)
 
 
 def warn_if_one_long_recording(estimator, n_samples):

@@ -11,15 +11,11 @@ from sklearn.utils import metadata_routing
 from sklearn.utils.validation import check_is_fitted
 
 from .._core._compat import Interval, StrOptions, _fit_context
-from .._core._panel import align_target, read_row_order
-from .._core._sequences import as_recordings
+from .._core._panel import align_target
 from .._core._validation import (
     check_column_scales,
     check_enough_rows,
-    check_finite,
     check_target_finite,
-    column_names_of,
-    validate_joint,
 )
 from .._hmm._em import fit_hmm, score_hmm
 from .._hmm._em_data import Columns
@@ -31,11 +27,7 @@ from .._hmm._missing import observed_counts
 from .._hmm._stale_inputs import MISSING_VALUES, learn_stale_noise
 from ._adaptation import AdaptMixin
 from ._io import ModelIOMixin
-from ._prediction_inputs import (
-    read_inputs,
-    warn_if_fitted_as_one_recording,
-    warn_if_one_long_recording,
-)
+from ._prediction_inputs import read_inputs, read_joint_inputs
 
 
 class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstimator):
@@ -247,30 +239,12 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         # Recordings in order of their ids, whether from the index or from groups: the
         # initialization reads the rows in order, so neither a shuffle of a panel's rows (a
         # resampling search) nor the order of the recordings given as arrays may change it.
-        y = align_target(X, y)
-        rows = read_row_order(X, groups, time, sort_recordings=True, sort_groups=True)
-        X, y, groups, time = (
-            rows.to_filter_order(X),
-            rows.to_filter_order(y),
-            rows.groups,
-            rows.time,
-        )
-        allow_nan = self.missing_values != "error"
-        check_target_finite(y, groups, allow_nan=allow_nan)
-        X, y = validate_joint(self, X, y, allow_nan=allow_nan)
-        Y = y.reshape(-1, 1) if y.ndim == 1 else y
+        inputs = read_joint_inputs(self, X, y, groups, time, fitting=True)
+        X, Y, recordings = inputs.X, inputs.Y, inputs.recordings
+        names, output_names = inputs.input_names, inputs.output_names
         self.n_outputs_ = Y.shape[1]
-        if groups is None:
-            warn_if_fitted_as_one_recording(X.shape[0])
-        recordings = as_recordings(groups, X.shape[0], time=time, min_length=2)
         # Without recordings there is nothing to compare a later prediction's length with.
-        self.longest_recording_ = None if groups is None else int(recordings.lengths.max())
-        names = column_names_of(self, X.shape[1])
-        output_names = [f"output {i}" for i in range(Y.shape[1])]
-        check_finite(X, name="X", column_names=names, recordings=recordings, allow_nan=allow_nan)
-        check_finite(
-            Y, name="y", column_names=output_names, recordings=recordings, allow_nan=allow_nan
-        )
+        self.longest_recording_ = int(recordings.lengths.max()) if inputs.grouped else None
         check_enough_rows(X.shape[0], self.n_states, X.shape[1] + Y.shape[1])
         # The engine's own layout, standardised in place: the only copy of the data it makes.
         standardized, center, scale = Columns.standardized(X, Y)
@@ -291,7 +265,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
             params.transmat,
             params.emissions,
             Standardization(center, scale, X.shape[1]),
-            scalar_output=y.ndim == 1,
+            scalar_output=inputs.scalar_output,
             feature_names=getattr(self, "feature_names_in_", None),
             stale_noise=stale_noise,
         )
@@ -454,20 +428,8 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         log_likelihood : float
         """
         check_is_fitted(self)
-        rows = read_row_order(X, groups)
-        allow_nan = self.missing_values != "error"
-        X, y = validate_joint(
-            self,
-            rows.to_filter_order(X),
-            rows.to_filter_order(y),
-            allow_nan=allow_nan,
-            reset=False,
-            ensure_all_finite="allow-nan" if allow_nan else True,
-        )
-        Y = y.reshape(-1, 1) if y.ndim == 1 else y
-        if rows.groups is None:
-            warn_if_one_long_recording(self, X.shape[0])
-        recordings = as_recordings(rows.groups, X.shape[0], time=rows.time)
+        inputs = read_joint_inputs(self, X, y, groups, None, fitting=False)
+        X, Y, recordings = inputs.X, inputs.Y, inputs.recordings
         scaling = self.model_.standardization
         log_likelihood = score_hmm(scaling.joint(X, Y), recordings, self.model_.hmm_parameters())
         return log_likelihood + scaling.log_jacobian(observed_counts(X, Y))
