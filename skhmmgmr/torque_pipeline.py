@@ -35,7 +35,7 @@ from ._core._compat import Interval, _fit_context, _routing_enabled
 from ._core._docstrings import fill_shared_parameters
 from ._core._panel import has_recording_index, read_row_order
 from ._core._sequences import as_recordings
-from .estimator._regressor import HMMGMRRegressor
+from .estimator import HMMGMRRegressor
 
 __all__ = ["SteeringFeatures", "TorquePipeline", "make_torque_pipeline"]
 

@@ -13,7 +13,7 @@ from sklearn.model_selection import PredefinedSplit
 
 from ._search._evaluation import check_recording_splits
 from ._search.base import RecordingSearchMixin
-from .estimator._regressor import HMMGMRRegressor
+from .estimator import HMMGMRRegressor
 from .state_selection import StateSelector
 
 __all__ = ["expected_failed_checks"]

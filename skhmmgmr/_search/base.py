@@ -19,7 +19,7 @@ from .._core._compat import HasMethods, Interval
 from .._core._panel import read_row_order
 from .._core._sequences import as_recordings
 from .._core._validation import check_finite, check_target_finite, column_names_of
-from ..estimator._regressor import HMMGMRRegressor
+from ..estimator import HMMGMRRegressor
 from ._evaluation import check_recording_splits, evaluate_models, shared_evaluation_store
 
 

@@ -116,7 +116,7 @@ class AdaptMixin:
         standardisation kept) move a state's mean to ``(n_k E_k[x] + r mu_k) / (n_k + r)``,
         so that a state seen in fewer than about ``r`` rows stays near its fitted value.
         Covariances ("v") and transitions ("t") adapt by the analogous rules (see
-        :mod:`skhmmgmr.estimator._adaptation`); the other parameters keep their fitted values.
+        :doc:`/user_guide/adaptation`); the other parameters keep their fitted values.
 
         This is not ``partial_fit``: in scikit-learn ``partial_fit`` learns incrementally
         towards the fit of all the data seen so far, whereas ``adapt`` treats the fitted
