@@ -16,7 +16,7 @@ from sklearn.feature_selection import SelectorMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._core._compat import HasMethods, Interval
-from .._core._panel import read_row_order
+from .._core._panel import align_target, read_row_order
 from .._core._sequences import as_recordings
 from .._core._validation import check_finite, check_target_finite, column_names_of
 from ..estimator import HMMGMRRegressor
@@ -65,26 +65,8 @@ class RecordingSearchMixin:
     }
 
     def _validate_search(self, X, y, groups):
-        # Recordings (and time order) from the index of X, in one order for any row permutation.
-        rows = read_row_order(X, groups, sort_recordings=True)
-        X, y, groups = rows.to_filter_order(X), rows.to_filter_order(y), rows.groups
-        check_target_finite(y, groups)
-        # At least one training and one validation row; sparse X is refused (TypeError):
-        # the models of the search fit dense rows.
-        X, y = validate_data(
-            self, X, y, y_numeric=True, dtype=float, ensure_all_finite=False, ensure_min_samples=2
-        )
-        if groups is not None and len(groups) != len(X):
-            raise ValueError(f"groups has {len(groups)} rows but X has {len(X)}")
-        if not np.isfinite(X).all():
-            # Refused here, not by the model of every split: the message names the column
-            # and the recording by its id.
-            check_finite(
-                X,
-                name="X",
-                column_names=column_names_of(self, X.shape[1]),
-                recordings=as_recordings(groups, len(X)),
-            )
+        # At least one training and one validation row.
+        X, y, groups = read_search_inputs(self, X, y, groups, min_samples=2)
         if self.sampling_period is None:
             raise ValueError(
                 f"{type(self).__name__} needs sampling_period (seconds between rows) for the "
@@ -156,6 +138,41 @@ class RecordingSearchMixin:
         tags = super().__sklearn_tags__()
         tags.target_tags.required = True
         return tags
+
+
+def read_search_inputs(selector, X, y, groups, *, min_samples=1):
+    """``(X, y, groups)`` of a selector's ``fit``, validated, in filter order: the one reader
+    of the searches and SpearmanSelector.
+
+    The recordings (and time order) come from ``groups`` or the index of ``X``, a panel's in
+    one order for any row permutation (plain arrays keep their row order, which a
+    ``PredefinedSplit`` indexes). Sparse ``X`` is refused (TypeError: the models fit dense
+    rows); a non-finite target or input is refused here, not by the model of every split,
+    naming the column and the recording by its id.
+    """
+    y = align_target(X, y)
+    rows = read_row_order(X, groups, sort_recordings=True)
+    X, y, groups = rows.to_filter_order(X), rows.to_filter_order(y), rows.groups
+    check_target_finite(y, groups)
+    X, y = validate_data(
+        selector,
+        X,
+        y,
+        y_numeric=True,
+        dtype=float,
+        ensure_all_finite=False,
+        ensure_min_samples=min_samples,
+    )
+    if groups is not None and len(groups) != len(X):
+        raise ValueError(f"groups has {len(groups)} rows but X has {len(X)}")
+    if not np.isfinite(X).all():
+        check_finite(
+            X,
+            name="X",
+            column_names=column_names_of(selector, X.shape[1]),
+            recordings=as_recordings(groups, len(X)),
+        )
+    return X, y, groups
 
 
 class RecordingSelector(RecordingSearchMixin, SelectorMixin, BaseEstimator):

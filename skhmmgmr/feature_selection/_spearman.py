@@ -11,13 +11,13 @@ import numpy as np
 from scipy import stats
 from sklearn.base import BaseEstimator
 from sklearn.feature_selection import SelectorMixin
-from sklearn.utils.validation import check_is_fitted, validate_data
+from sklearn.utils.validation import check_is_fitted
 
 from .._core._compat import Interval, StrOptions, _fit_context
 from .._core._docstrings import fill_shared_parameters
-from .._core._panel import read_row_order
 from .._core._sequences import as_recordings
-from .._core._validation import check_dense, check_finite, check_target_finite, column_names_of
+from .._core._validation import check_dense, check_finite, check_target_finite
+from .._search.base import read_search_inputs
 
 
 @fill_shared_parameters
@@ -156,16 +156,7 @@ class SpearmanSelector(SelectorMixin, BaseEstimator):
         -------
         self : SpearmanSelector
         """
-        rows = read_row_order(X, groups, sort_recordings=True)  # recordings from the index of X
-        X, y, groups = rows.to_filter_order(X), rows.to_filter_order(y), rows.groups
-        check_target_finite(y, groups)
-        X, y = validate_data(self, X, y, y_numeric=True, dtype=float, ensure_all_finite=False)
-        check_finite(
-            X,
-            name="X",
-            column_names=column_names_of(self, X.shape[1]),
-            recordings=as_recordings(groups, len(X)),
-        )
+        X, y, groups = read_search_inputs(self, X, y, groups)
         if self.k != "all" and self.k > X.shape[1]:
             raise ValueError(f"k={self.k} is more than the {X.shape[1]} features")
         self.scores_, self.pvalues_ = spearman_relevance(X, y, groups=groups)
