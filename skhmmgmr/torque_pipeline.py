@@ -33,8 +33,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._core._compat import Interval, _fit_context, _routing_enabled
 from ._core._docstrings import fill_shared_parameters
-from ._core._panel import has_recording_index, read_row_order
-from ._core._sequences import as_recordings
+from ._core._panel import align_target, has_recording_index, read_layout
 from .estimator import HMMGMRRegressor
 
 __all__ = ["SteeringFeatures", "TorquePipeline", "make_torque_pipeline"]
@@ -300,9 +299,9 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
 
     def _filtered(self, velocity, X, groups):
         """The velocity through the first-order filter, restarted at every recording."""
-        rows = read_row_order(X, groups)
+        rows = read_layout(X, groups)
         ordered = rows.to_filter_order(velocity)
-        recordings = as_recordings(rows.groups, len(ordered))
+        recordings = rows.recordings(len(ordered))
         if rows.time is not None:
             self._check_period(np.asarray(rows.time, dtype=float), recordings)
         decay = math.exp(-self.sampling_period / self.velocity_filter)
@@ -447,6 +446,10 @@ class TorquePipeline(Pipeline):
         -------
         self : TorquePipeline
         """
+        if not params:  # (per-row fit parameters would need the rows' order too)
+            layout = read_layout(X, groups, canonical=True)
+            y = layout.to_filter_order(align_target(X, y, layout))
+            X, groups = layout.to_filter_order(X), layout.handed_down()
         return super().fit(X, y, **self._fit_params(X, groups, params))
 
     def _fit_params(self, X, groups, params):
@@ -501,12 +504,18 @@ class TorquePipeline(Pipeline):
         -------
         y_pred : ndarray, or a tuple with ``return_std``
         """
+        layout = read_layout(X, groups)
+        X, groups = layout.to_filter_order(X), layout.handed_down()
         if groups is None or _routing_enabled():
             extra = {} if groups is None else {"groups": groups}
-            return super().predict(X, **extra, **params)
-        check_is_fitted(self)
-        final = self.steps[-1][1]
-        return final.predict(self._transformed(X, groups, False), groups=groups, **params)
+            result = super().predict(X, **extra, **params)
+        else:
+            check_is_fitted(self)
+            final = self.steps[-1][1]
+            result = final.predict(self._transformed(X, groups, False), groups=groups, **params)
+        if isinstance(result, tuple):
+            return tuple(layout.to_caller_order(part) for part in result)
+        return layout.to_caller_order(result)
 
     def score(self, X, y=None, sample_weight=None, groups=None, **params):
         """The final step's score, ``groups`` handed to every step that takes it.
@@ -525,6 +534,9 @@ class TorquePipeline(Pipeline):
         -------
         score : float
         """
+        layout = read_layout(X, groups)
+        X, y, groups = layout.to_filter_order(X), layout.to_filter_order(y), layout.handed_down()
+        sample_weight = layout.to_filter_order(sample_weight)
         if groups is None or _routing_enabled():
             extra = {} if groups is None else {"groups": groups}
             return super().score(X, y, sample_weight=sample_weight, **extra, **params)

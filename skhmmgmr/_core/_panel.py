@@ -9,32 +9,52 @@ module reads that index and puts the rows into the order the filter needs (recor
 contiguous, each in time order); the estimator gives its results back in the caller's order.
 """
 
-from dataclasses import dataclass
-
 import numpy as np
 import pandas as pd
 
 from ._schema import RECORDING, TIME
-from ._sequences import as_recordings
+from ._sequences import as_recordings, check_min_length, check_time_order, one_recording
 
 
-@dataclass(frozen=True)
-class RowOrder:
-    """Per-row metadata of a call, in the order the filter reads the rows.
+class RecordingLayout:
+    """The recordings of a call: recording id, time and position of every row, read once.
+
+    The one parser, :func:`read_layout`, makes it at the outermost public call; what that
+    call hands on (a pipeline's steps, the ``predict`` of a scorer, the metric code) gets
+    :meth:`handed_down`'s ids as ``groups`` and reads the same layout from them instead of
+    parsing again.
 
     Attributes
     ----------
     groups : ndarray or None
-        Recording id of every row (``None``: one recording).
+        Recording id of every row, in filter order (``None``: one recording).
     time : ndarray or None
-        Time stamp of every row, when known.
+        Time stamp of every row, in filter order, when known.
     order : ndarray of int or None
         ``rows[order]`` are the caller's rows in filter order; ``None`` when they already are.
+    canonical : bool
+        Whether the recordings come in the order of their ids (as text), the order of a fit.
+    from_index : bool
+        Whether the recordings were read from the index of the rows (a panel).
     """
 
-    groups: object
-    time: object
-    order: object
+    __slots__ = (
+        "groups",
+        "time",
+        "order",
+        "canonical",
+        "from_index",
+        "_recordings",
+        "_time_checked",
+        "_handed",
+    )
+
+    def __init__(self, groups, time, order, *, canonical=False, from_index=False, recordings=None):
+        self.groups, self.time, self.order = groups, time, order
+        self.canonical, self.from_index = canonical, from_index
+        self._recordings = recordings
+        self._time_checked = False
+        self._handed = None
 
     def to_filter_order(self, values):
         """Rows of ``values`` (array, DataFrame or Series) in filter order."""
@@ -51,6 +71,73 @@ class RowOrder:
         restored = np.empty_like(values)
         restored[self.order] = values
         return restored
+
+    def recordings(self, n_samples, *, min_length=1):
+        """The contiguous recordings of the ``n_samples`` rows in filter order
+        (:class:`~skhmmgmr._core._sequences.Recordings`): parsed at the first call, then
+        kept; the time stamps, when known, are checked to increase within each."""
+        if self.groups is None:
+            recordings = one_recording(n_samples)
+        elif self._recordings is None:
+            recordings = self._recordings = as_recordings(self.groups, n_samples)
+        else:
+            recordings = self._recordings
+            if len(self.groups) != n_samples:  # as as_recordings says it
+                as_recordings(self.groups, n_samples)
+        if self.time is not None and not self._time_checked:
+            check_time_order(self.time, recordings, n_samples)
+            self._time_checked = True
+        check_min_length(recordings, min_length)
+        return recordings
+
+    def handed_down(self):
+        """The recording ids of the rows in filter order, carrying this layout, to pass as
+        ``groups`` with the rows in filter order (``None`` for one recording)."""
+        if self.groups is None:
+            return None
+        if getattr(self.groups, "_layout", None) is self:  # handed down already
+            return self.groups
+        if self._handed is not None:
+            return self._handed
+        layout = RecordingLayout(
+            self.groups,
+            self.time,
+            None,
+            canonical=self.canonical,
+            from_index=self.from_index,
+            recordings=self._recordings,
+        )
+        layout._time_checked = self._time_checked
+        ids = np.array(self.groups, copy=True).view(RecordingIds)
+        ids.flags.writeable = False
+        ids._layout = layout
+        layout.groups = self._handed = ids
+        return ids
+
+
+class RecordingIds(np.ndarray):
+    """Recording ids handed down with their :class:`RecordingLayout` (read-only). A slice, a
+    view or a copy carries no layout: whoever gets one parses it again."""
+
+    def __array_finalize__(self, obj):
+        self._layout = None
+
+
+class RowOrder(RecordingLayout):
+    """The name 0.1.0 gave the row order of a call (now :class:`RecordingLayout`), kept so
+    that references to it still resolve."""
+
+    __slots__ = ()
+
+
+def handed_layout(groups, time=None, *, canonical=False):
+    """The layout that ``groups`` carries (see :meth:`RecordingLayout.handed_down`), or
+    ``None``: none, or one read in another order than ``canonical`` asks for, or a ``time``
+    given beside it."""
+    layout = getattr(groups, "_layout", None)
+    if layout is None or time is not None or (canonical and not layout.canonical):
+        return None
+    return layout
 
 
 # Names under which the index levels are read: the package's own, then sktime's (its panel
@@ -97,12 +184,15 @@ def has_recording_index(X):
     return index_levels(X)[0] is not None
 
 
-def align_target(X, y):
+def align_target(X, y, layout=None):
     """``y`` paired with the rows of ``X`` by label when ``X`` is a panel (recordings in its
-    index) and ``y`` a pandas object: reordered to ``X``'s rows if its index holds the same
-    labels in another order, refused if it holds other labels. Anything else is returned as
-    it is (an array pairs by position)."""
-    if not isinstance(y, pd.Series | pd.DataFrame) or not has_recording_index(X):
+    index; ``layout``, the call's :class:`RecordingLayout`, says so when given) and ``y`` a
+    pandas object: reordered to ``X``'s rows if its index holds the same labels in another
+    order, refused if it holds other labels. Anything else is returned as it is (an array
+    pairs by position)."""
+    if not isinstance(y, pd.Series | pd.DataFrame):
+        return y
+    if not (has_recording_index(X) if layout is None else layout.from_index):
         return y
     if y.index.equals(X.index):
         return y
@@ -123,40 +213,48 @@ def align_target(X, y):
     return y.reindex(X.index)
 
 
-def read_row_order(X, groups=None, time=None, *, sort_recordings=False, sort_groups=False):
-    """Recording ids, time stamps and row order of a call, from arguments or the index of X.
+def read_layout(X, groups=None, time=None, *, canonical=False, reorder_groups=True):
+    """The one parser of recordings: recording ids, time stamps and row order of a call, from
+    its arguments or the index of ``X``.
 
-    ``groups`` and ``time`` given explicitly win over nothing: when the index holds them too,
-    both must agree row by row. When the index holds the recordings and the time, the rows of
-    a recording may come in any order and interleaved with other recordings: the returned order
-    makes recordings contiguous (in order of first appearance) and each sorted by time.
+    ``groups`` handed down by an outer call (:meth:`RecordingLayout.handed_down`) give back
+    their layout without parsing. Otherwise ``groups`` and ``time`` given explicitly win over
+    nothing: when the index holds them too, both must agree row by row. When the index holds
+    the recordings and the time, the rows of a recording may come in any order and
+    interleaved with other recordings: the returned order makes recordings contiguous and
+    each sorted by time.
 
     Parameters
     ----------
-    X : array-like, pandas.DataFrame or pandas.Series
+    X : array-like, pandas.DataFrame, pandas.Series or None
+        The rows (``None``: only ``groups`` and ``time`` are read).
     groups, time : array-like of shape (n_samples,), default=None
-    sort_recordings : bool, default=False
-        Put the recordings of an indexed ``X`` in order of their ids (as text) rather than of
-        first appearance, so that the filter order does not depend on how the rows were
-        shuffled: a fit (whose initialization reads the rows in order) then gives the same
-        model for any permutation of the rows.
-    sort_groups : bool, default=False
-        Likewise for the recordings of a plain ``X`` given by ``groups`` (contiguous, each in
-        time order): a fit then gives the same model as for the panel of the same rows,
-        whatever the order of the recordings. Not for callers whose other inputs are indexed
-        by row position (a ``PredefinedSplit``).
+    canonical : bool, default=False
+        Put the recordings in the order of their ids (as text), from a panel or from
+        ``groups``, so that the filter order depends neither on how the rows were shuffled
+        nor on the order of the recordings: a fit, whose initialization reads the rows in
+        order, then gives the same model for the same rows in any order. Otherwise a panel's
+        recordings come in order of first appearance and plain rows keep their order (a
+        prediction gives its results back by position).
+    reorder_groups : bool, default=True
+        With ``canonical``, whether the recordings given by ``groups`` are put in order too;
+        ``False`` for callers whose other inputs index the rows by position (a
+        ``PredefinedSplit``), which then get a panel's recordings in id order only.
 
     Returns
     -------
-    RowOrder
+    RecordingLayout
     """
+    layout = handed_layout(groups, time, canonical=canonical)
+    if layout is not None:
+        return layout
     index_recording, index_time = index_levels(X)
     if index_recording is None:
         if index_time is not None and time is None:
             time = np.asarray(index_time)
-        if sort_groups and groups is not None:
+        if canonical and reorder_groups and groups is not None:
             return _recordings_in_id_order(groups, time)
-        return RowOrder(groups=groups, time=time, order=None)
+        return RecordingLayout(groups, time, None, canonical=groups is None)
     ids = _text_ids(index_recording)
     if groups is not None:
         _check_agree(groups, ids, "groups", "the recording level of the index")
@@ -166,7 +264,7 @@ def read_row_order(X, groups=None, time=None, *, sort_recordings=False, sort_gro
             _check_agree(time, index_time, "time", "the time level of the index")
         time = index_time
     codes, uniques = pd.factorize(ids, sort=False)
-    if sort_recordings:
+    if canonical:
         rank = np.empty(len(uniques), dtype=np.intp)
         rank[np.argsort(np.asarray(uniques, dtype=str), kind="stable")] = np.arange(len(uniques))
         codes = rank[codes]
@@ -176,26 +274,40 @@ def read_row_order(X, groups=None, time=None, *, sort_recordings=False, sort_gro
         order = np.lexsort((np.asarray(time, dtype=float), codes))
     if np.array_equal(order, np.arange(len(order))):
         order = None
-    row_order = RowOrder(groups=ids, time=time, order=order)
-    return RowOrder(
-        groups=row_order.to_filter_order(ids),
-        time=row_order.to_filter_order(time),
-        order=order,
-    )
+    return _moved(ids, time, order, canonical=canonical, from_index=True)
+
+
+def recordings_of(groups, n_samples, *, time=None, min_length=1):
+    """The recordings of ``n_samples`` rows in filter order whose ids are ``groups`` (those
+    handed down by an outer call carry them already), with ``time`` checked to increase
+    within each and every recording at least ``min_length`` rows long."""
+    layout = handed_layout(groups)
+    if layout is None:
+        return as_recordings(groups, n_samples, time=time, min_length=min_length)
+    recordings = layout.recordings(n_samples, min_length=min_length)
+    if time is not None:
+        check_time_order(np.asarray(time, dtype=float), recordings, n_samples)
+    return recordings
 
 
 def _recordings_in_id_order(groups, time):
     """The rows of contiguous recordings (``groups``) with the recordings in order of their
-    ids as text, as :func:`read_row_order` puts a panel's with ``sort_recordings``."""
+    ids as text, as :func:`read_layout` puts a panel's when ``canonical``."""
     groups = np.asarray(groups.to_numpy() if isinstance(groups, pd.Series) else groups)
     recordings = as_recordings(groups, len(groups))  # refuses scattered recordings, naming one
     rank = np.argsort(np.asarray(recordings.ids).astype(str), kind="stable")
     if np.array_equal(rank, np.arange(len(rank))):
-        return RowOrder(groups=groups, time=time, order=None)
-    order = np.concatenate([np.arange(recordings.starts[r], recordings.stops[r]) for r in rank])
-    given = RowOrder(groups=groups, time=time, order=order)
-    return RowOrder(
-        groups=given.to_filter_order(groups), time=given.to_filter_order(time), order=order
+        return RecordingLayout(groups, time, None, canonical=True, recordings=recordings)
+    order = recordings.row_order(rank)
+    return _moved(groups, time, order, canonical=True, recordings=recordings.reordered(rank))
+
+
+def _moved(groups, time, order, **facts):
+    """The layout of rows whose ids and times, in the caller's order, are ``groups`` and
+    ``time``, read in ``order``."""
+    given = RecordingLayout(groups, time, order)
+    return RecordingLayout(
+        given.to_filter_order(groups), given.to_filter_order(time), order, **facts
     )
 
 

@@ -49,6 +49,19 @@ class Recordings:
         """One recording id per row."""
         return np.repeat(self.ids, self.lengths)
 
+    def reordered(self, rank):
+        """The recordings after moving recording ``rank[i]`` to position ``i`` (their rows
+        moved with them, contiguous)."""
+        lengths = self.lengths[rank]
+        stops = np.cumsum(lengths)
+        return Recordings(ids=self.ids[rank], starts=stops - lengths, stops=stops)
+
+    def row_order(self, rank):
+        """The rows of :meth:`reordered`, as positions in the current rows."""
+        return np.concatenate(
+            [np.arange(self.starts[r], self.stops[r]) for r in rank] or [np.array([], int)]
+        )
+
 
 def as_recordings(groups, n_samples, *, time=None, min_length=1):
     """Validate ``groups`` (one recording id per row) and return the recordings.
@@ -69,13 +82,22 @@ def as_recordings(groups, n_samples, *, time=None, min_length=1):
     Recordings
     """
     if groups is None:
-        recordings = Recordings(
-            ids=np.array([0]), starts=np.array([0]), stops=np.array([n_samples])
-        )
+        recordings = one_recording(n_samples)
     else:
         recordings = _contiguous_recordings(groups, n_samples)
     if time is not None:
-        _check_time_order(time, recordings, n_samples)
+        check_time_order(time, recordings, n_samples)
+    check_min_length(recordings, min_length)
+    return recordings
+
+
+def one_recording(n_samples):
+    """All ``n_samples`` rows as one recording (id 0)."""
+    return Recordings(ids=np.array([0]), starts=np.array([0]), stops=np.array([n_samples]))
+
+
+def check_min_length(recordings, min_length):
+    """Refuse a recording shorter than ``min_length`` rows, naming it."""
     short = recordings.lengths < min_length
     if np.any(short):
         first = int(np.flatnonzero(short)[0])
@@ -83,7 +105,6 @@ def as_recordings(groups, n_samples, *, time=None, min_length=1):
             f"recording {recordings.ids[first]!r} has n_samples={recordings.lengths[first]} "
             f"row(s); at least {min_length} are needed"
         )
-    return recordings
 
 
 def _contiguous_recordings(groups, n_samples):
@@ -135,7 +156,8 @@ def _raise_not_contiguous(groups, block_codes, starts, stops):
         seen[code] = (start, stop)
 
 
-def _check_time_order(time, recordings, n_samples):
+def check_time_order(time, recordings, n_samples):
+    """Refuse time stamps that are not finite or do not increase within every recording."""
     time = np.asarray(time, dtype=float)
     if time.shape != (n_samples,):
         raise ValueError(f"time has shape {time.shape}, expected ({n_samples},)")

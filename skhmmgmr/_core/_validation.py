@@ -9,7 +9,7 @@ from scipy import sparse
 from sklearn.utils.validation import check_array, check_consistent_length, validate_data
 
 from ._compat import Interval, validate_parameter_constraints
-from ._sequences import as_recordings
+from ._panel import RecordingLayout, recordings_of
 
 # Parameters of the methods that adapt a fitted model or forecast with it (not estimator
 # parameters, so that they are checked where they are passed): one set of constraints, so that
@@ -99,7 +99,8 @@ def _shown(recording):
 
 def check_target_finite(y, groups, allow_nan=False):
     """Name the column and recording of a NaN (unless ``allow_nan``) or infinite target
-    before generic validation."""
+    before generic validation (``groups``: the recording ids, or the call's
+    :class:`~skhmmgmr._core._panel.RecordingLayout`)."""
     try:
         values = np.asarray(y)
     except (TypeError, ValueError):
@@ -111,6 +112,9 @@ def check_target_finite(y, groups, allow_nan=False):
     values = values.astype(float, copy=False)
     if values.ndim not in (1, 2) or np.isfinite(values).all():
         return
+    layout = groups if isinstance(groups, RecordingLayout) else None
+    if layout is not None:
+        groups = layout.groups
     if groups is not None and len(groups) != values.shape[0]:
         return
     values = values.reshape(values.shape[0], -1)
@@ -120,7 +124,10 @@ def check_target_finite(y, groups, allow_nan=False):
         names = [str(y.name)]
     else:
         names = [f"output {i}" for i in range(values.shape[1])]
-    recordings = as_recordings(groups, values.shape[0])
+    if layout is not None:
+        recordings = layout.recordings(values.shape[0])
+    else:
+        recordings = recordings_of(groups, values.shape[0])
     check_finite(values, name="y", column_names=names, recordings=recordings, allow_nan=allow_nan)
 
 

@@ -16,8 +16,7 @@ from sklearn.feature_selection import SelectorMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._core._compat import HasMethods, Interval
-from .._core._panel import align_target, read_row_order
-from .._core._sequences import as_recordings
+from .._core._panel import align_target, read_layout, recordings_of
 from .._core._validation import check_finite, check_target_finite, column_names_of
 from ..estimator import HMMGMRRegressor
 from ._evaluation import check_recording_splits, evaluate_models, shared_evaluation_store
@@ -150,9 +149,9 @@ def read_search_inputs(selector, X, y, groups, *, min_samples=1):
     rows); a non-finite target or input is refused here, not by the model of every split,
     naming the column and the recording by its id.
     """
-    y = align_target(X, y)
-    rows = read_row_order(X, groups, sort_recordings=True)
-    X, y, groups = rows.to_filter_order(X), rows.to_filter_order(y), rows.groups
+    layout = read_layout(X, groups, canonical=True, reorder_groups=False)
+    y = align_target(X, y, layout)
+    X, y, groups = layout.to_filter_order(X), layout.to_filter_order(y), layout.handed_down()
     check_target_finite(y, groups)
     X, y = validate_data(
         selector,
@@ -170,7 +169,7 @@ def read_search_inputs(selector, X, y, groups, *, min_samples=1):
             X,
             name="X",
             column_names=column_names_of(selector, X.shape[1]),
-            recordings=as_recordings(groups, len(X)),
+            recordings=recordings_of(groups, len(X)),
         )
     return X, y, groups
 

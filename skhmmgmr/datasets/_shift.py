@@ -3,8 +3,7 @@
 import numpy as np
 import pandas as pd
 
-from .._core._panel import read_row_order
-from .._core._sequences import as_recordings
+from .._core._panel import read_layout
 
 
 def shift_target(y, horizon_rows, groups=None):
@@ -45,9 +44,9 @@ def shift_target(y, horizon_rows, groups=None):
     if values.ndim not in (1, 2):
         raise ValueError(f"y must be 1-D or 2-D, got {values.ndim} dimensions")
     # A pandas index with recordings (and time) may hold the rows in any order.
-    rows = read_row_order(y, groups)
+    rows = read_layout(y, groups)
     values = rows.to_filter_order(values)
-    recordings = as_recordings(rows.groups, values.shape[0])
+    recordings = rows.recordings(values.shape[0])
     shifted = np.full_like(values, np.nan)
     for start, stop in zip(recordings.starts, recordings.stops, strict=True):
         if stop - start > horizon_rows:

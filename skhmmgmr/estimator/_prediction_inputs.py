@@ -10,8 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._core._panel import align_target, read_row_order
-from .._core._sequences import as_recordings
+from .._core._panel import align_target, read_layout
 from .._core._validation import (
     check_finite,
     check_target_finite,
@@ -23,25 +22,25 @@ from .._hmm._stale_inputs import stale_noise_for
 
 
 def read_inputs(estimator, X, groups, time):
-    """``(standardized, recordings, rows, missing)`` of the inputs ``X`` of a fitted
-    :class:`~skhmmgmr.HMMGMRRegressor`: ``rows`` (:func:`~skhmmgmr._core._panel.read_row_order`)
-    puts results back in the caller's order, ``missing`` is
-    :func:`~skhmmgmr._hmm._gmr.read_missing` of the standardised rows."""
+    """``(standardized, recordings, layout, missing)`` of the inputs ``X`` of a fitted
+    :class:`~skhmmgmr.HMMGMRRegressor`: ``layout``
+    (:func:`~skhmmgmr._core._panel.read_layout`) puts results back in the caller's order,
+    ``missing`` is :func:`~skhmmgmr._hmm._gmr.read_missing` of the standardised rows."""
     check_is_fitted(estimator)
-    rows = read_row_order(X, groups, time)
+    layout = read_layout(X, groups, time)
     X = validate_data(
-        estimator, rows.to_filter_order(X), reset=False, ensure_all_finite=False, dtype=float
+        estimator, layout.to_filter_order(X), reset=False, ensure_all_finite=False, dtype=float
     )
-    if rows.groups is None:
+    if layout.groups is None:
         warn_if_one_long_recording(estimator, X.shape[0])
-    recordings = as_recordings(rows.groups, X.shape[0], time=rows.time)
+    recordings = layout.recordings(X.shape[0])
     names = column_names_of(estimator, X.shape[1])
     allow_nan = estimator.missing_values != "error"
     check_finite(X, name="X", column_names=names, recordings=recordings, allow_nan=allow_nan)
     model = estimator.model_
     standardized = model.standardization.inputs(X)
     noise = stale_noise_for(model, estimator.missing_values)
-    return standardized, recordings, rows, read_missing(standardized, recordings, noise)
+    return standardized, recordings, layout, read_missing(standardized, recordings, noise)
 
 
 @dataclass(frozen=True)
@@ -67,11 +66,11 @@ def read_joint_inputs(estimator, X, y, groups, time, *, fitting):
     unless the estimator reads missing values, naming the column and recording, as is a NaN
     or infinite input.
     """
-    y = align_target(X, y)
-    rows = read_row_order(X, groups, time, sort_recordings=fitting, sort_groups=fitting)
-    X, y, groups = rows.to_filter_order(X), rows.to_filter_order(y), rows.groups
+    layout = read_layout(X, groups, time, canonical=fitting)
+    y = align_target(X, y, layout)
+    X, y, groups = layout.to_filter_order(X), layout.to_filter_order(y), layout.groups
     allow_nan = estimator.missing_values != "error"
-    check_target_finite(y, groups, allow_nan=allow_nan)
+    check_target_finite(y, layout, allow_nan=allow_nan)
     X, y = validate_joint(estimator, X, y, allow_nan=allow_nan, reset=fitting)
     Y = y.reshape(-1, 1) if y.ndim == 1 else y
     if not fitting and Y.shape[1] != estimator.model_.n_outputs:
@@ -81,7 +80,7 @@ def read_joint_inputs(estimator, X, y, groups, time, *, fitting):
             warn_if_fitted_as_one_recording(X.shape[0])
         else:
             warn_if_one_long_recording(estimator, X.shape[0])
-    recordings = as_recordings(groups, X.shape[0], time=rows.time, min_length=2 if fitting else 1)
+    recordings = layout.recordings(X.shape[0], min_length=2 if fitting else 1)
     input_names = column_names_of(estimator, X.shape[1])
     output_names = [f"output {i}" for i in range(Y.shape[1])]
     for values, name, names in ((X, "X", input_names), (Y, "y", output_names)):

@@ -15,7 +15,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._core._compat import Interval, StrOptions, _fit_context
 from .._core._docstrings import fill_shared_parameters
-from .._core._sequences import as_recordings
+from .._core._panel import recordings_of
 from .._core._validation import check_dense, check_finite, check_target_finite
 from .._search.base import read_search_inputs
 
@@ -70,7 +70,7 @@ def spearman_relevance(X, y, *, groups=None):
     y = np.asarray(y, dtype=float).ravel()
     if X.ndim != 2 or len(X) != len(y):
         raise ValueError(f"X must be 2-D with one row per target value; got {X.shape}, {y.shape}")
-    recordings = as_recordings(groups, len(X), min_length=3)
+    recordings = recordings_of(groups, len(X), min_length=3)
     # A NaN would silently drop its recording from the feature's average: refuse it.
     names = names or [f"x{j}" for j in range(X.shape[1])]
     check_finite(X, name="X", column_names=names, recordings=recordings)

@@ -8,8 +8,7 @@ from sklearn.utils.metadata_routing import UNCHANGED, MetadataRequest, get_routi
 
 from .._core._compat import _MetadataRequester, _routing_enabled
 from .._core._docstrings import fill_shared_parameters
-from .._core._panel import has_recording_index, read_row_order
-from .._core._sequences import as_recordings
+from .._core._panel import read_layout, recordings_of
 from .._core._validation import check_sampling_period
 from ._table import (
     average,
@@ -152,13 +151,12 @@ class _RecordingScorer(_MetadataRequester):
                 "takes groups"
             )
         self._check_params()
-        index_time = None
-        if has_recording_index(X):
-            # Recordings in the index: score them in filter order, whatever order the caller
-            # (a resampling search, a permutation) put the rows in.
-            rows = read_row_order(X, groups)
-            X, y_true = rows.to_filter_order(X), rows.to_filter_order(y_true)
-            groups, index_time = rows.groups, rows.time
+        # Read once and handed to predict and the metrics. Recordings in the index are
+        # scored in filter order, whatever order the caller (a resampling search, a
+        # permutation) put the rows in.
+        layout = read_layout(X, groups)
+        X, y_true = layout.to_filter_order(X), layout.to_filter_order(y_true)
+        groups, index_time = layout.handed_down(), layout.time
         sampling_period, time = None, None
         if self._needs_sampling:
             sampling_period, time = self.sampling_period, self._time_of(X)
@@ -202,7 +200,7 @@ class _RecordingScorer(_MetadataRequester):
             mode = "groups" if _predict_takes_groups(estimator) else "per_recording"
         if mode == "groups":
             return estimator.predict(X, groups=groups)
-        recordings = as_recordings(groups, _n_rows(X))
+        recordings = recordings_of(groups, _n_rows(X))
         parts = [estimator.predict(_take_rows(X, rows)) for _, rows in recordings.slices()]
         return np.concatenate([np.asarray(p) for p in parts], axis=0)
 

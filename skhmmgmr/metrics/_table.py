@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 from sklearn.utils.validation import check_array
 
-from .._core._sequences import as_recordings
+from .._core._panel import recordings_of
 from .._core._validation import binary_unit, check_sampling_period, constant_to_round_off
 
 
@@ -111,7 +111,7 @@ def recording_metrics(
             raise ValueError(f"y_true has {y_true.shape[1]} output(s) but y_pred has {n_outputs}")
     if smoothness:
         sampling_period, time = check_sampling(sampling_period, time, n_samples)
-    recordings = as_recordings(groups, n_samples, time=time, min_length=2 if smoothness else 1)
+    recordings = recordings_of(groups, n_samples, time=time, min_length=2 if smoothness else 1)
 
     n_rec = len(recordings)
     rmse = np.empty((n_rec, n_outputs)) if accuracy else None

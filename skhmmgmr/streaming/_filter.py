@@ -24,8 +24,7 @@ import numbers
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
-from .._core._panel import align_target, read_row_order
-from .._core._sequences import as_recordings
+from .._core._panel import align_target, read_layout, recordings_of
 from .._hmm._fitted import FittedHMMGMR
 from .._hmm._missing import gmr_given_observed
 from .._hmm._stale_inputs import MISSING_VALUES, carried_inputs
@@ -503,8 +502,8 @@ class FilterStream:
         std : ndarray of the same shape, only when ``return_std`` is True
         flags : ndarray of str of shape (n_samples,), only when ``return_flag`` is True
         """
-        y = align_target(X, y)
-        rows = read_row_order(X)
+        rows = read_layout(X)
+        y = align_target(X, y, rows)
         names = getattr(self, "feature_names_in_", None)
         X = as_batch(rows.to_filter_order(X), names, self.n_features_in_)
         if y is not None:
@@ -534,7 +533,7 @@ class FilterStream:
         """{row: recording id} of the rows where a recording of an indexed batch begins."""
         if groups is None or n_samples == 0:
             return {}
-        recordings = as_recordings(groups, n_samples)
+        recordings = recordings_of(groups, n_samples)
         starts = {
             int(start): rec for rec, start in zip(recordings.ids, recordings.starts, strict=True)
         }
