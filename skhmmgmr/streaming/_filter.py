@@ -270,6 +270,9 @@ class FilterStream:
         """Unpickle, then link the buffer views again (pickling copies every view)."""
         self.__dict__.update(state)
         n_inputs, n_whitened = self._z.shape[0] - 1, self._squares.shape[0] - 1
+        # a stream pickled before pipelines streamed reads the regressor's rows
+        self.__dict__.setdefault("_stages", ())
+        self.__dict__.setdefault("_row_shape", (n_inputs,))
         self._z_inputs, self._squares_head = self._z[:n_inputs], self._squares[:n_whitened]
         width = self._weights.shape[1]
         self._work = self._product_buffer(width, n_whitened, self._work[0])
