@@ -17,8 +17,8 @@ Printed per model: mean and worst-recording test accuracy (%), roughness (std of
 time derivative, Nm/s, the thesis' smoothness), the D.5-normalised performance score at the
 thesis' 50/50 trade-off (lower is better; normalised over the models of the table), fit time,
 predict throughput (rows/s on the test set) and per-sample streaming latency (median of 2,000
-single-row calls: ``FilterStream.update`` for the HMM models, plus the derived inputs computed
-in numpy for the pipeline; ``predict`` on a one-row array for the others). Then the same
+single-row calls: ``FilterStream.update`` for the HMM models, the pipeline's own stream of the
+sensed rows for the pipeline; ``predict`` on a one-row array for the others). Then the same
 accuracy and roughness per driver style, and the targets of the pipeline against the plain
 boosting baseline. Run with::
 
@@ -94,30 +94,8 @@ def median_latency_us(function, rows, n_calls=2000):
     return float(np.median(elapsed)) / 1000.0
 
 
-def derived_row(row, columns, state):
-    """The pipeline's derived inputs for one row, in numpy, as a stream would compute them
-    (``state``: the filtered velocity and the filter's decay, or None)."""
-    v, angle, acceleration = row[columns]
-    if state is not None:
-        state[0] = state[1] * state[0] + (1.0 - state[1]) * v
-        v = state[0]
-    extra = np.array(
-        [
-            np.tanh(v / 0.1),
-            angle * abs(angle),
-            angle**3,
-            acceleration * abs(acceleration),
-            acceleration**3,
-        ]
-    )
-    return np.concatenate([row, extra])
-
-
-def stream_latency(model, rows, derive=None):
-    stream = model.filter_stream()
-    if derive is None:
-        return median_latency_us(stream.update, rows)
-    return median_latency_us(lambda row: stream.update(derive(row)), rows)
+def stream_latency(model, rows):
+    return median_latency_us(model.filter_stream().update, rows)
 
 
 def fit_predict(model, train, test, columns, grouped):
@@ -137,17 +115,7 @@ def evaluate(name, model, train, test, rate, columns, grouped):
     pred, fit_s, rows_per_s = fit_predict(model, train, test, columns, grouped)
     table = score(test["driver_torque"].to_numpy(), pred, test, rate)
     rows = test[columns].to_numpy()[:2000]
-    if name.startswith(PIPELINE):
-        positions = [
-            columns.index(c)
-            for c in ("steering_wheel_velocity", "steering_wheel_angle", "lateral_acceleration")
-        ]
-        features = model[0]
-        state = None
-        if features.velocity_filter is not None:
-            state = [0.0, np.exp(-features.sampling_period / features.velocity_filter)]
-        latency = stream_latency(model[-1], rows, lambda row: derived_row(row, positions, state))
-    elif grouped:
+    if name.startswith(PIPELINE) or grouped:  # the pipeline's stream derives the sensed rows
         latency = stream_latency(model, rows)
     else:
         latency = median_latency_us(model.predict, rows[:, np.newaxis, :])

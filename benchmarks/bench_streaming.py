@@ -5,7 +5,10 @@ Fits a K=5, 3-input HMM-GMR model on generated recordings, then times 20,000 sin
 (``relevance=16``: online MAP adaptation of the state means, with and without forgetting)
 and 2,000 of ``model.predict`` with ``time.perf_counter_ns``, and prints the median and 99th
 percentile in microseconds, and the cost of an adapting update relative to a plain one
-(target: at most 3x). Run with::
+(target: at most 3x). Then the stream of a whole ``make_torque_pipeline`` (K=5, the three
+sensed inputs it derives from, velocity filter on: 8 inputs reach the regressor) on the sensed
+rows, against the stream of its regressor alone on the derived rows (target: at most 1.5x).
+Run with::
 
     python benchmarks/bench_streaming.py
 """
@@ -13,8 +16,9 @@ percentile in microseconds, and the cost of an adapting update relative to a pla
 import time
 
 import numpy as np
+import pandas as pd
 
-from skhmmgmr import HMMGMRRegressor
+from skhmmgmr import HMMGMRRegressor, make_torque_pipeline
 
 N_STATES = 5
 N_UPDATES = 20_000
@@ -80,6 +84,37 @@ def main():
             print(f"{'':<34} {ratio:.2f}x a plain update (median; target <= 3x)")
     one_row = rows[:, np.newaxis, :]
     report("model.predict (1-row array)", time_calls(model.predict, one_row, N_PREDICTS))
+    pipeline_streams()
+
+
+def pipeline_streams():
+    """The stream of a torque pipeline on sensed rows against its regressor's stream on the
+    derived rows (the same filter, the derived inputs computed outside the timing)."""
+    X, y, groups = make_data()
+    names = ["steering_wheel_angle", "steering_wheel_velocity", "lateral_acceleration"]
+    X = pd.DataFrame(X, columns=names)
+    pipeline = make_torque_pipeline(
+        N_STATES, velocity_filter=0.02, sampling_period=0.01, random_state=0
+    ).fit(X, y, groups=groups)
+    sensed = X[groups == 0].to_numpy()
+    derived = pipeline[:-1].transform(X[groups == 0]).to_numpy()
+    streams = {
+        "regressor stream (derived rows)": (pipeline[-1].filter_stream(), derived),
+        "pipeline stream (sensed rows)": (pipeline.filter_stream(), sensed),
+    }
+    for stream, rows in streams.values():
+        time_calls(stream.update, rows, 1000)
+    elapsed = {name: [] for name in streams}
+    for _ in range(4):
+        for name, (stream, rows) in streams.items():
+            stream.reset()
+            elapsed[name].append(time_calls(stream.update, rows, N_UPDATES // 4))
+    print(f"\ntorque pipeline, K={N_STATES}, {derived.shape[1]} inputs to the regressor:")
+    bare = np.concatenate(elapsed["regressor stream (derived rows)"])
+    for name, parts in elapsed.items():
+        report(name, np.concatenate(parts))
+    ratio = np.median(np.concatenate(elapsed["pipeline stream (sensed rows)"])) / np.median(bare)
+    print(f"{'':<34} {ratio:.2f}x the regressor's update (median; target <= 1.5x)")
 
 
 if __name__ == "__main__":

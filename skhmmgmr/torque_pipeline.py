@@ -29,12 +29,15 @@ import pandas as pd
 from scipy.signal import lfilter
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.pipeline import Pipeline
+from sklearn.utils.metaestimators import available_if
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._core._compat import Interval, _fit_context, _routing_enabled
 from ._core._docstrings import fill_shared_parameters
 from ._core._panel import align_target, has_recording_index, read_layout
 from .estimator import HMMGMRRegressor
+from .streaming import FilterStream
+from .streaming._derived import check_time_steps
 
 __all__ = ["SteeringFeatures", "TorquePipeline", "make_torque_pipeline"]
 
@@ -292,6 +295,56 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
             )
         return np.asarray([*input_features, *self._derived_names()], dtype=object)
 
+    def stream_settings(self):
+        """What a sample-by-sample stream of :meth:`transform` needs, as plain values.
+
+        :class:`~skhmmgmr.FilterStream` reads it to stream a fitted pipeline of these steps
+        and the regressor on the sensed rows (``pipeline.filter_stream()``).
+
+        Returns
+        -------
+        settings : dict
+            ``n_features_in`` and ``feature_names_in`` (``None`` without names) of the input
+            rows, ``feature_names_out``; ``friction_position`` (the velocity's position in the
+            row, ``None`` without a friction input), ``friction_velocity``; ``filter_decay``,
+            the velocity filter's factor per row ``exp(-sampling_period / velocity_filter)``
+            (``None`` without the filter), and ``sampling_period``; ``load_positions`` (the
+            load columns' positions) and ``powers``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from skhmmgmr import SteeringFeatures
+        >>> step = SteeringFeatures(friction_column=2, load_columns=(0,), powers=(3,),
+        ...                         velocity_filter=0.02, sampling_period=0.01)
+        >>> settings = step.fit(np.zeros((5, 3))).stream_settings()
+        >>> settings["friction_position"], settings["load_positions"], settings["feature_names_out"]
+        (2, [0], ['x0', 'x1', 'x2', 'steering_friction', 'x0_cube'])
+        >>> round(settings["filter_decay"], 4)  # exp(-0.01 / 0.02)
+        0.6065
+        """
+        check_is_fitted(self, "n_features_in_")
+        positions = self._sources()
+        names = getattr(self, "feature_names_in_", None)
+        friction = self.friction_velocity is not None
+        filtered = friction and self.velocity_filter is not None
+        return {
+            "n_features_in": int(self.n_features_in_),
+            "feature_names_in": None if names is None else [str(name) for name in names],
+            "feature_names_out": [str(name) for name in self.get_feature_names_out()],
+            "friction_position": positions[self.friction_column] if friction else None,
+            "friction_velocity": float(self.friction_velocity) if friction else None,
+            "filter_decay": self._decay() if filtered else None,
+            "sampling_period": None
+            if self.sampling_period is None
+            else float(self.sampling_period),
+            "load_positions": [positions[column] for column in self.load_columns],
+            "powers": [int(power) for power in self.powers],
+        }
+
+    def _decay(self):
+        return math.exp(-self.sampling_period / self.velocity_filter)
+
     def _derived_names(self):
         names = [FRICTION_NAME] if self.friction_velocity is not None else []
         names += [_power_name(_column_label(c), p) for c in self.load_columns for p in self.powers]
@@ -303,29 +356,12 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
         ordered = rows.to_filter_order(velocity)
         recordings = rows.recordings(len(ordered))
         if rows.time is not None:
-            self._check_period(np.asarray(rows.time, dtype=float), recordings)
-        decay = math.exp(-self.sampling_period / self.velocity_filter)
+            check_time_steps(np.asarray(rows.time, dtype=float), recordings, self)
+        decay = self._decay()
         filtered = np.empty_like(ordered)
         for start, stop in zip(recordings.starts, recordings.stops, strict=True):
             filtered[start:stop] = low_pass(ordered[start:stop], decay)
         return rows.to_caller_order(filtered)
-
-    def _check_period(self, time, recordings):
-        """Refuse a time level whose median step in a recording is not ``sampling_period``
-        (within 1 %): the filter's time constant would be off by their ratio."""
-        for rec, start, stop in zip(
-            recordings.ids, recordings.starts, recordings.stops, strict=True
-        ):
-            if stop - start < 2:
-                continue
-            step = float(np.median(np.diff(time[start:stop])))
-            if abs(step - self.sampling_period) > 0.01 * self.sampling_period:
-                raise ValueError(
-                    f"The time level of X steps {step:.6g} s (median) in recording {rec!r}, but "
-                    f"sampling_period={self.sampling_period!r}: the velocity filter would run "
-                    f"{self.sampling_period / step:.3g} times too fast or slow. Pass the "
-                    "recordings' own period, or resample them (resample_recordings)."
-                )
 
     def _check_powers(self):
         for power in self.powers:
@@ -398,6 +434,26 @@ def _takes_groups(step, method):
     return function is not None and "groups" in inspect.signature(function).parameters
 
 
+def _final_step_has(method):
+    """``available_if`` check: the pipeline's last step has ``method``."""
+
+    def check(pipeline):
+        return hasattr(pipeline.steps[-1][1], method)
+
+    return check
+
+
+def _in_caller_order(layout, result):
+    """A method's result (arrays, a tuple of them, or anything else) in the caller's rows."""
+    if isinstance(result, tuple):
+        return tuple(_in_caller_order(layout, part) for part in result)
+    return layout.to_caller_order(result) if isinstance(result, np.ndarray) else result
+
+
+def _n_rows(X):
+    return X.shape[0] if hasattr(X, "shape") else len(X)
+
+
 def _needs_recordings(step):
     """Whether the step's output depends on where recordings begin (a filter over the rows)."""
     return isinstance(step, SteeringFeatures) and step.velocity_filter is not None
@@ -415,6 +471,11 @@ class TorquePipeline(Pipeline):
     whose output depends on the recordings is refused, naming the step. Recordings in the
     index of a panel (:func:`skhmmgmr.datasets.to_panel`) reach every step as they are.
 
+    The regressor's own methods are the pipeline's, with the regressor's signatures and the
+    recordings handed on alike: :meth:`predict` with ``return_std``,
+    :meth:`predict_state_proba`, :meth:`predict_ahead` and :meth:`adapt` (which adapts the
+    regressor in place). :meth:`filter_stream` streams the sensed rows one at a time.
+
     Parameters are those of :class:`~sklearn.pipeline.Pipeline`.
 
     Examples
@@ -428,6 +489,9 @@ class TorquePipeline(Pipeline):
     >>> pipe = pipe.fit(X, y, groups=data["recording"])
     >>> pipe.predict(X, groups=data["recording"]).shape
     (4800,)
+    >>> estimate, std = pipe.predict(X, groups=data["recording"], return_std=True)
+    >>> pipe.predict_state_proba(X, groups=data["recording"]).shape
+    (4800, 2)
     """
 
     def fit(self, X, y=None, groups=None, **params):
@@ -498,24 +562,207 @@ class TorquePipeline(Pipeline):
         groups : array-like of shape (n_samples,), default=None
             Recording id of every row.
         **params : dict
-            Passed to the final step's ``predict`` (such as ``return_std=True``).
+            Passed to the final step's ``predict`` (such as ``return_std=True`` or ``time``,
+            with metadata routing on or off).
 
         Returns
         -------
         y_pred : ndarray, or a tuple with ``return_std``
         """
+        own = "return_std" in params or "time" in params  # the regressor's, not metadata
+        if own or not _routing_enabled():
+            return self._final_method("predict", X, groups, **params)
         layout = read_layout(X, groups)
         X, groups = layout.to_filter_order(X), layout.handed_down()
-        if groups is None or _routing_enabled():
-            extra = {} if groups is None else {"groups": groups}
-            result = super().predict(X, **extra, **params)
-        else:
+        extra = {} if groups is None else {"groups": groups}
+        return _in_caller_order(layout, super().predict(X, **extra, **params))
+
+    def _final_method(self, method, X, groups, *args, y=None, **params):
+        """The final step's ``method`` on ``X`` through the transformers, the recordings read
+        once and handed to every step that takes them; results in the caller's row order."""
+        check_is_fitted(self)
+        layout = read_layout(X, groups)
+        if y is not None:
+            args = (layout.to_filter_order(align_target(X, y, layout)), *args)
+        if params.get("time") is not None:
+            params["time"] = layout.to_filter_order(np.asarray(params["time"]))
+        X, groups = layout.to_filter_order(X), layout.handed_down()
+        return _in_caller_order(layout, self._final_on(method, X, groups, *args, **params))
+
+    def _final_on(self, method, X, groups, *args, **params):
+        """The final step's ``method`` on ``X`` through the transformers, ``groups`` handed
+        to every step that takes it."""
+        final = self.steps[-1][1]
+        Xt = self._transformed(X, groups, False)
+        if _takes_groups(final, method):
+            params["groups"] = groups
+        return getattr(final, method)(Xt, *args, **params)
+
+    @available_if(_final_step_has("predict_state_proba"))
+    def predict_state_proba(self, X, groups=None, time=None):
+        """The regressor's filtered state probabilities given the inputs up to each row.
+
+        ``X`` goes through the transformers first, ``groups`` handed to every step that
+        takes it (with metadata routing on or off), as in :meth:`predict`.
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_features)
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row.
+        time : array-like of shape (n_samples,), default=None
+            Optional time stamps, checked to increase within every recording.
+
+        Returns
+        -------
+        alpha : ndarray of shape (n_samples, n_states)
+            See :meth:`HMMGMRRegressor.predict_state_proba
+            <skhmmgmr.HMMGMRRegressor.predict_state_proba>`.
+
+        Examples
+        --------
+        >>> from skhmmgmr import make_torque_pipeline
+        >>> from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping
+        >>> data = make_lane_keeping(30.0, sampling_rate=20.0, random_state=0)
+        >>> X, y = data[list(FEATURE_NAMES)], data["driver_torque"]
+        >>> pipe = make_torque_pipeline(n_states=2, random_state=0).fit(X, y)
+        >>> pipe.predict_state_proba(X).sum(axis=1)[:3]
+        array([1., 1., 1.])
+        """
+        return self._final_method("predict_state_proba", X, groups, time=time)
+
+    @available_if(_final_step_has("predict_ahead"))
+    def predict_ahead(
+        self, X, steps, groups=None, time=None, *, state_output="marginal", return_std=False
+    ):
+        """The regressor's forecast of the outputs ``steps`` rows ahead.
+
+        ``X`` goes through the transformers first, ``groups`` handed to every step that
+        takes it (with metadata routing on or off), as in :meth:`predict`.
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_features)
+        steps : int
+            Horizon in rows (``seconds * sampling_rate``).
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row.
+        time : array-like of shape (n_samples,), default=None
+        state_output : {"marginal", "conditional"}, default="marginal"
+        return_std : bool, default=False
+            Also return the predictive standard deviation.
+
+        Returns
+        -------
+        y_pred : ndarray of shape (n_samples,) or (n_samples, n_outputs)
+        y_std : ndarray of the same shape, only when ``return_std`` is True
+            See :meth:`HMMGMRRegressor.predict_ahead <skhmmgmr.HMMGMRRegressor.predict_ahead>`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from skhmmgmr import make_torque_pipeline
+        >>> from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping
+        >>> data = make_lane_keeping(30.0, sampling_rate=20.0, random_state=0)
+        >>> X, y = data[list(FEATURE_NAMES)], data["driver_torque"]
+        >>> pipe = make_torque_pipeline(n_states=2, random_state=0).fit(X, y)
+        >>> bool(np.allclose(pipe.predict_ahead(X, 0), pipe.predict(X)))
+        True
+        >>> pipe.predict_ahead(X, 10).shape  # the torque half a second ahead
+        (600,)
+        """
+        return self._final_method(
+            "predict_ahead",
+            X,
+            groups,
+            steps,
+            time=time,
+            state_output=state_output,
+            return_std=return_std,
+        )
+
+    @available_if(_final_step_has("adapt"))
+    def adapt(self, X, y, groups=None, *, relevance=16.0, parameters="m", n_iter=10, time=None):
+        """Adapt the fitted regressor to new recordings (MAP EM); the transformers stay.
+
+        ``X`` goes through the transformers first, ``groups`` handed to every step that
+        takes it (with metadata routing on or off), then the regressor adapts as
+        :meth:`HMMGMRRegressor.adapt <skhmmgmr.HMMGMRRegressor.adapt>` does, in place.
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_features)
+            Inputs of the new recordings.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs)
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row.
+        relevance : float, default=16.0
+            Relevance factor ``r`` > 0: rows of evidence at which a state moves halfway.
+        parameters : str, default="m"
+            Which parameters adapt: any of "m" (means), "v" (covariances), "t" (transitions).
+        n_iter : int, default=10
+            Maximum number of MAP EM iterations.
+        time : array-like of shape (n_samples,), default=None
+            Optional time stamps, checked to increase within every recording.
+
+        Returns
+        -------
+        self : TorquePipeline
+            With the regressor adapted (a new ``model_``, the previous one not modified; no
+            rows leave it unchanged).
+
+        Examples
+        --------
+        >>> from skhmmgmr import make_torque_pipeline
+        >>> from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping
+        >>> data = make_lane_keeping(30.0, sampling_rate=20.0, random_state=0)
+        >>> X, y = data[list(FEATURE_NAMES)], data["driver_torque"]
+        >>> pipe = make_torque_pipeline(n_states=2, random_state=0).fit(X, y)
+        >>> fitted = pipe[-1].model_
+        >>> adapted = pipe.adapt(X[:200], y[:200] + 0.2, relevance=8.0)  # another driver
+        >>> bool(adapted is pipe and pipe[-1].model_ is not fitted)
+        True
+        """
+        options = {"relevance": relevance, "parameters": parameters, "n_iter": n_iter}
+        if _n_rows(X) == 0:  # nothing to derive: the regressor checks y and groups, keeps its model
             check_is_fitted(self)
-            final = self.steps[-1][1]
-            result = final.predict(self._transformed(X, groups, False), groups=groups, **params)
-        if isinstance(result, tuple):
-            return tuple(layout.to_caller_order(part) for part in result)
-        return layout.to_caller_order(result)
+            self.steps[-1][1].adapt(X, y, groups=groups, time=time, **options)
+            return self
+        self._final_method("adapt", X, groups, y=y, time=time, **options)
+        return self
+
+    def filter_stream(self, **kwargs):
+        """Sample-by-sample causal filter of the whole pipeline for real-time use.
+
+        Parameters
+        ----------
+        **kwargs : dict
+            Passed to :class:`~skhmmgmr.FilterStream` (``min_log_density``, ``relevance``...;
+            ``missing_values`` defaults to the regressor's).
+
+        Returns
+        -------
+        stream : FilterStream
+            Call ``stream.update(row)`` with every sensed row (in the pipeline's input order,
+            or by name) and ``stream.reset()`` at the start of every recording; the derived
+            inputs are computed in the stream, and the estimates equal those of
+            :meth:`predict`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from skhmmgmr import make_torque_pipeline
+        >>> from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping
+        >>> data = make_lane_keeping(30.0, sampling_rate=20.0, random_state=0)
+        >>> X, y = data[list(FEATURE_NAMES)], data["driver_torque"]
+        >>> pipe = make_torque_pipeline(n_states=2, velocity_filter=0.1, sampling_period=0.05,
+        ...                             random_state=0).fit(X, y)
+        >>> stream = pipe.filter_stream()
+        >>> estimates = [stream.update(row) for row in X.to_numpy()[:100]]
+        >>> bool(np.allclose(estimates, pipe.predict(X[:100]), rtol=0, atol=1e-12))
+        True
+        """
+        return FilterStream(self, **kwargs)
 
     def score(self, X, y=None, sample_weight=None, groups=None, **params):
         """The final step's score, ``groups`` handed to every step that takes it.

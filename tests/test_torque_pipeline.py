@@ -430,3 +430,111 @@ def test_the_performance_score_predicts_the_pipeline_once(monkeypatch):
     monkeypatch.setattr(HMMGMRRegressor, "predict", counted)
     PerformanceScore(0.5, 0.5, sampling_period=0.01)(pipe, X, y, groups=groups)
     assert len(calls) == 1 and len(np.unique(groups)) > 1
+
+
+# --- #36: the regressor's own methods through the pipeline ------------------------------------
+
+
+def _per_recording(pipeline, X, groups, method, *args, **kwargs):
+    """A plain loop: every recording through the fitted transformer alone, then the regressor's
+    method on it alone; the results stacked in row order."""
+    transformer, regressor = pipeline[0], pipeline[-1]
+    parts = [
+        getattr(regressor, method)(transformer.transform(X[groups == rec]), *args, **kwargs)
+        for rec in pd.unique(groups)
+    ]
+    if isinstance(parts[0], tuple):
+        return tuple(np.concatenate(part) for part in zip(*parts, strict=True))
+    return np.concatenate(parts)
+
+
+@pytest.fixture(scope="module")
+def fitted_pipeline():
+    X, y, groups, _ = _protocol()
+    return _filtered_pipeline().fit(X, y, groups=groups)
+
+
+@pytest.mark.parametrize("routing", [False, True])
+@pytest.mark.parametrize(
+    "method, args, kwargs",
+    [
+        ("predict", (), {"return_std": True}),
+        ("predict_state_proba", (), {}),
+        ("predict_ahead", (0,), {}),
+        ("predict_ahead", (25,), {"return_std": True}),
+        ("predict_ahead", (25,), {"state_output": "conditional"}),
+    ],
+)
+def test_the_regressors_methods_through_the_pipeline(
+    fitted_pipeline, routing, method, args, kwargs
+):
+    from sklearn.pipeline import Pipeline
+
+    X, _, groups, _ = _protocol()
+    assert isinstance(fitted_pipeline, Pipeline)
+    expected = _per_recording(fitted_pipeline, X, groups, method, *args, **kwargs)
+    with sklearn.config_context(enable_metadata_routing=routing):
+        got = getattr(fitted_pipeline, method)(X, *args, groups=groups, **kwargs)
+    for a, b in zip(
+        got if isinstance(got, tuple) else (got,),
+        expected if isinstance(expected, tuple) else (expected,),
+        strict=True,
+    ):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+
+
+def test_return_std_with_routing_on_from_a_panel(fitted_pipeline):
+    from skhmmgmr.datasets import to_panel
+
+    X, _, groups, data = _protocol()
+    panel = to_panel(data).sample(frac=1.0, random_state=0)
+    with sklearn.config_context(enable_metadata_routing=True):
+        estimate, std = fitted_pipeline.predict(panel[X.columns], return_std=True)
+    by_groups = fitted_pipeline.predict(X, groups=groups, return_std=True)
+    order = pd.MultiIndex.from_arrays([data["recording"], data["time"]])
+    for got, expected in zip((estimate, std), by_groups, strict=True):
+        got = pd.Series(got, index=panel.index).reindex(order).to_numpy()
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("routing", [False, True])
+def test_adapt_through_the_pipeline_adapts_the_regressor(fitted_pipeline, routing):
+    import copy
+
+    X, y, groups, _ = _protocol()
+    new = np.isin(groups, pd.unique(groups)[:4])
+    X_new, y_new, groups_new = X[new], y[new] + 0.3, groups[new]
+    original = fitted_pipeline[-1].model_
+    pipeline = copy.deepcopy(fitted_pipeline)
+    fitted = pipeline[-1].model_
+    derived = pd.concat(
+        [pipeline[0].transform(X_new[groups_new == rec]) for rec in pd.unique(groups_new)]
+    )
+    reference = copy.deepcopy(fitted_pipeline[-1]).adapt(
+        derived, y_new, groups=groups_new, relevance=8.0, parameters="mv", n_iter=3
+    )
+    with sklearn.config_context(enable_metadata_routing=routing):
+        returned = pipeline.adapt(
+            X_new, y_new, groups=groups_new, relevance=8.0, parameters="mv", n_iter=3
+        )
+    assert returned is pipeline and pipeline[-1].model_ is not fitted
+    assert fitted_pipeline[-1].model_ is original  # the copy adapted, not the original
+    np.testing.assert_allclose(pipeline[-1].means_, reference.means_, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(pipeline[-1].covars_, reference.covars_, rtol=0, atol=1e-10)
+    assert pipeline[-1].log_likelihood_ == pytest.approx(reference.log_likelihood_, abs=1e-8)
+    # no rows: nothing changes; rows that disagree with y are refused by the regressor
+    model = pipeline[-1].model_
+    assert pipeline.adapt(X.iloc[:0], y[:0]) is pipeline and pipeline[-1].model_ is model
+    with pytest.raises(ValueError, match="y has 3"):
+        pipeline.adapt(X.iloc[:0], y[:3])
+
+
+def test_the_regressors_methods_exist_only_with_the_regressor():
+    from sklearn.linear_model import Ridge
+
+    from skhmmgmr.torque_pipeline import TorquePipeline
+
+    pipeline = TorquePipeline([("features", SteeringFeatures()), ("ridge", Ridge())])
+    for method in ("adapt", "predict_ahead", "predict_state_proba"):
+        assert not hasattr(pipeline, method)
+        assert hasattr(make_torque_pipeline(), method)

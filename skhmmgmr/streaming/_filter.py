@@ -16,6 +16,10 @@ The stream reads a :class:`~skhmmgmr.FittedHMMGMR` (an estimator's ``model_``): 
 density, the regressions and the standardisation are that object's. A sample with missing
 inputs (NaN, when they are marginalised) takes a slower path: the Gaussians of every state
 conditioned on its observed inputs (:func:`~skhmmgmr._hmm._missing.gmr_given_observed`).
+
+A fitted Pipeline of ``SteeringFeatures`` steps and the regressor streams the sensed rows: the
+derived inputs are computed first, one scalar operation at a time, into a preallocated row
+(:mod:`skhmmgmr.streaming._derived`), which then goes the regressor's way.
 """
 
 import math
@@ -29,6 +33,7 @@ from .._hmm._fitted import FittedHMMGMR
 from .._hmm._missing import gmr_given_observed
 from .._hmm._stale_inputs import MISSING_VALUES, carried_inputs
 from ._adaptation import OnlineMeans, check_adaptation
+from ._derived import check_final, read_pipeline
 from ._inputs import as_batch, as_row
 
 FLAG_OK = "ok"
@@ -50,9 +55,12 @@ class FilterStream:
 
     Parameters
     ----------
-    model : FittedHMMGMR or HMMGMRRegressor
-        A fitted model, or a fitted estimator (its ``model_`` is read). Usually created with
-        ``estimator.filter_stream()``.
+    model : FittedHMMGMR, HMMGMRRegressor or Pipeline
+        A fitted model, or a fitted estimator (its ``model_`` is read), or a fitted Pipeline of
+        :class:`~skhmmgmr.SteeringFeatures` steps ending in an ``HMMGMRRegressor``
+        (:func:`~skhmmgmr.make_torque_pipeline`'s, or any scikit-learn ``Pipeline`` of those
+        steps), which then takes the sensed rows (see Notes). Usually created with
+        ``estimator.filter_stream()`` or ``pipeline.filter_stream()``.
     min_log_density : float, default=log(smallest normal double) ~ -708.4
         A sample whose input log-density, in the standardised units the model works in, is below
         this value in every state is an outlier (see Notes). The default flags exactly the
@@ -65,7 +73,8 @@ class FilterStream:
         last observed values in the recording (since :meth:`reset`), as ``predict`` of a
         model fitted with ``missing_values="carry_forward"`` does (the model must hold the
         inputs' variograms, ``stale_noise``). ``None``: the estimator's ``missing_values``
-        when ``model`` is an estimator, "error" for a :class:`~skhmmgmr.FittedHMMGMR`.
+        when ``model`` is an estimator (the regressor's, for a Pipeline), "error" for a
+        :class:`~skhmmgmr.FittedHMMGMR`.
     relevance : float, default=None
         Online adaptation of the state means (see Notes): the relevance factor ``r`` > 0 of
         the MAP rule of :meth:`HMMGMRRegressor.adapt <skhmmgmr.HMMGMRRegressor.adapt>`.
@@ -87,9 +96,10 @@ class FilterStream:
         Recording of the last batch given with a ``"recording"`` index level (see
         :meth:`update_batch`); ``None`` after :meth:`reset` and for plain input.
     n_features_in_ : int
-        Number of inputs of one sample.
+        Number of inputs of one sample (for a Pipeline: of one sensed row, before the derived
+        inputs).
     feature_names_in_ : ndarray of str
-        Input names, when the model was fitted on named columns.
+        Input names, when the model (the Pipeline) was fitted on named columns.
 
     Notes
     -----
@@ -118,6 +128,20 @@ class FilterStream:
     samples and those with missing inputs do not learn. :meth:`reset` keeps what was
     learned, :meth:`reset_adaptation` forgets it, :meth:`adapted_model` returns it.
 
+    A Pipeline (``SteeringFeatures`` steps, then the regressor) streams the sensed rows, in the
+    Pipeline's input order or by name: every update computes the derived inputs of the row
+    and filters the row they make with the regressor, so that the estimates equal
+    ``pipeline.predict`` on the recording (up to round-off; ``update_batch`` on a panel
+    equals it with the panel's recordings). The velocity filter of ``velocity_filter`` keeps
+    its state between updates and restarts with the regressor's filter (:meth:`reset`, a new
+    recording in :meth:`update_batch`); it follows the batch rule of ``SteeringFeatures``
+    (it starts at the first observed velocity of the recording; a missing velocity gives a
+    missing friction input and leaves its state alone). A held row still feeds its velocity
+    to the velocity filter, as ``predict`` would, so that the derived inputs of the rows
+    after it are ``predict``'s; only an infinite velocity is read as missing (``predict``
+    refuses it). Missing values, ``target`` and the adaptation are the regressor's, as for the
+    regressor's own stream.
+
     Examples
     --------
     >>> import numpy as np
@@ -144,9 +168,18 @@ class FilterStream:
         forgetting=1.0,
     ):
         estimator = None if isinstance(model, FittedHMMGMR) else model
+        self._stages = ()
+        if estimator is not None and hasattr(estimator, "steps"):  # a Pipeline
+            self._stages, (name, estimator) = read_pipeline(estimator)
         if estimator is not None:  # a fitted estimator first, as its other methods check
             check_is_fitted(estimator)
-            model = estimator.model_
+            model = getattr(estimator, "model_", None)
+            if not isinstance(model, FittedHMMGMR):
+                raise TypeError(
+                    "FilterStream streams a fitted HMMGMRRegressor, a FittedHMMGMR or a fitted "
+                    f"Pipeline ending in an HMMGMRRegressor; got {type(estimator).__name__}"
+                    + (f" (the Pipeline's step {name!r})" if self._stages else "")
+                )
         if missing_values is None:
             missing_values = getattr(estimator, "missing_values", "error")
         if missing_values not in MISSING_VALUES:
@@ -161,8 +194,16 @@ class FilterStream:
         params, scaling = model.gmr, model.standardization
         n_states, n_outputs, n_inputs = params.coef.shape
         self.n_features_in_ = n_inputs
-        if model.feature_names is not None:
-            self.feature_names_in_ = np.asarray(model.feature_names, dtype=object)
+        names = model.feature_names
+        if self._stages:
+            check_final(self._stages, n_inputs, names)
+            first = self._stages[0]
+            self.n_features_in_, names = first.n_features_in, first.feature_names_in
+            # the sensed row followed by every step's derived inputs, as the regressor reads it
+            self._derived_row = np.empty(n_inputs)
+        self._row_shape = (self.n_features_in_,)
+        if names is not None:
+            self.feature_names_in_ = np.asarray(names, dtype=object)
         self.min_log_density = float(min_log_density)
         self._n_states, self._n_outputs = n_states, n_outputs
         self._scalar_output = model.scalar_output
@@ -227,7 +268,10 @@ class FilterStream:
     def __setstate__(self, state):
         """Unpickle, then link the buffer views again (pickling copies every view)."""
         self.__dict__.update(state)
-        n_inputs, n_whitened = self.n_features_in_, self._squares.shape[0] - 1
+        n_inputs, n_whitened = self._z.shape[0] - 1, self._squares.shape[0] - 1
+        # a stream pickled before pipelines streamed reads the regressor's rows
+        self.__dict__.setdefault("_stages", ())
+        self.__dict__.setdefault("_row_shape", (n_inputs,))
         self._z_inputs, self._squares_head = self._z[:n_inputs], self._squares[:n_whitened]
         width = self._weights.shape[1]
         self._work = self._product_buffer(width, n_whitened, self._work[0])
@@ -253,6 +297,8 @@ class FilterStream:
         self.recording_ = None
         if self._carried is not None:
             self._carried.reset()
+        for stage in self._stages:
+            stage.reset()
         return self
 
     def reset_adaptation(self):
@@ -297,8 +343,9 @@ class FilterStream:
         Parameters
         ----------
         features : array-like of shape (n_features,) or mapping
-            One sample. A dict or :class:`pandas.Series` keyed by feature name is accepted
-            when the model was fitted on named columns.
+            One sample (for a Pipeline: the sensed row, before the derived inputs). A dict or
+            :class:`pandas.Series` keyed by feature name is accepted when the model was fitted
+            on named columns.
         return_std : bool, default=False
             Also return the predictive standard deviation.
         return_flag : bool, default=False
@@ -313,12 +360,14 @@ class FilterStream:
         std : float or ndarray, only when ``return_std`` is True
         flag : str, only when ``return_flag`` is True
         """
-        if type(features) is np.ndarray and features.shape == self._z_inputs.shape:
+        if type(features) is np.ndarray and features.shape == self._row_shape:
             row = features
         else:
             row = as_row(features, getattr(self, "feature_names_in_", None), self.n_features_in_)
         if target is not None:
             target = self._read_target(target)  # checked before the sample is consumed
+        if self._stages:
+            row = self._derive(row)
         np.subtract(row, self._input_center, out=self._z_inputs)
         np.divide(self._z_inputs, self._input_scale, out=self._z_inputs)
         estimate = self._step()
@@ -332,6 +381,14 @@ class FilterStream:
         if return_flag:
             result += (self.last_flag_,)
         return result
+
+    def _derive(self, row):
+        """The sensed row followed by the derived inputs, in the preallocated row."""
+        values = row.tolist()
+        for stage in self._stages:
+            stage.append(values)
+        self._derived_row[:] = values
+        return self._derived_row
 
     def _step(self):
         """Advance the filter with the standardised sample in ``self._z``."""
@@ -487,8 +544,8 @@ class FilterStream:
         Parameters
         ----------
         X : array-like of shape (n_samples, n_features)
-            Consecutive samples; a DataFrame's columns are selected by feature name when the
-            model was fitted on named columns.
+            Consecutive samples (for a Pipeline: sensed rows); a DataFrame's columns are
+            selected by feature name when the model was fitted on named columns.
         return_std : bool, default=False
             Also return the predictive standard deviations.
         return_flag : bool, default=False
@@ -508,6 +565,8 @@ class FilterStream:
         X = as_batch(rows.to_filter_order(X), names, self.n_features_in_)
         if y is not None:
             y = self._read_targets(rows.to_filter_order(y), X.shape[0])
+        for stage in self._stages:  # a time level at another period than the filter's
+            stage.check_time(rows.time, rows.groups)
         restarts = self._recording_starts(rows.groups, X.shape[0])
         shape = (X.shape[0],) if self._scalar_output else (X.shape[0], self._n_outputs)
         estimates = np.empty(shape)
@@ -517,6 +576,8 @@ class FilterStream:
         for i, row in enumerate(X):
             if i in restarts:
                 self.reset().recording_ = restarts[i]
+            if self._stages:
+                row = self._derive(row)
             np.subtract(row, self._input_center, out=z_inputs)
             np.divide(z_inputs, self._input_scale, out=z_inputs)
             estimates[i] = self._step()

@@ -1,0 +1,207 @@
+"""Derived inputs one sensed row at a time: the transformers of a fitted Pipeline, streamed.
+
+:class:`~skhmmgmr.FilterStream` streams a fitted Pipeline whose transformers describe
+themselves with a ``stream_settings()`` method (:meth:`SteeringFeatures.stream_settings
+<skhmmgmr.SteeringFeatures.stream_settings>`) and whose last step is a fitted
+:class:`~skhmmgmr.HMMGMRRegressor`. The pipeline's module sits above this one, so nothing here
+imports it: a step is read through the plain description it returns, a dict of
+
+``n_features_in`` (int), ``feature_names_in`` (list of str or None), ``feature_names_out``
+(list of str), ``friction_position`` (int or None: no friction input), ``friction_velocity``
+(float), ``filter_decay`` (float or None: no velocity filter), ``sampling_period`` (float or
+None), ``load_positions`` (list of int) and ``powers`` (list of int).
+
+Every step appends its derived inputs to its input row, so the row the regressor reads is the
+sensed row followed by every step's derived inputs. An update reads the sensed row as a Python
+list once and computes the derived inputs with scalar operations (a handful per input); the
+only state is the velocity filter's, restarted at every recording.
+"""
+
+import math
+
+import numpy as np
+
+from .._core._sequences import as_recordings
+
+SETTINGS = (
+    "n_features_in",
+    "feature_names_in",
+    "feature_names_out",
+    "friction_position",
+    "friction_velocity",
+    "filter_decay",
+    "sampling_period",
+    "load_positions",
+    "powers",
+)
+
+
+class DerivedInputs:
+    """The derived inputs of one step, sample by sample, with its velocity filter's state.
+
+    The velocity filter is that of :func:`skhmmgmr.torque_pipeline.low_pass` one sample at a
+    time: it starts at the first observed velocity of the recording (its output equals it
+    there), ``y = decay y_last + (1 - decay) x`` for the next ones, and a missing velocity
+    gives a missing friction input and leaves the state alone, the next observed one then
+    taken in over the whole time since the last, ``decay^(g+1)`` after ``g`` missing ones. An
+    infinite velocity is read as missing (the batch filter would carry it on for the rest of
+    the recording).
+
+    Parameters
+    ----------
+    settings : dict
+        The step's ``stream_settings()`` (see the module's docstring).
+    """
+
+    def __init__(self, settings):
+        missing = [key for key in SETTINGS if key not in settings]
+        if missing:
+            raise ValueError(f"stream settings lack {missing}")
+        self.n_features_in = int(settings["n_features_in"])
+        names = settings["feature_names_in"]
+        self.feature_names_in = None if names is None else list(names)
+        self.feature_names_out = list(settings["feature_names_out"])
+        self.friction = settings["friction_position"]
+        self.friction_velocity = settings["friction_velocity"]
+        self.decay = settings["filter_decay"]
+        self.sampling_period = settings["sampling_period"]
+        self.loads = tuple(int(p) for p in settings["load_positions"])
+        self.powers = tuple(int(p) for p in settings["powers"])
+        if self.decay is not None:
+            self.decay = float(self.decay)
+            self.gain = 1.0 - self.decay
+        self.reset()
+
+    @property
+    def n_features_out(self):
+        return len(self.feature_names_out)
+
+    def reset(self):
+        """Restart the velocity filter (a new recording)."""
+        self.filtered = None  # the filter's output at the last observed velocity
+        self.since = 0  # rows since that velocity
+
+    def append(self, values):
+        """Append the derived inputs of one row (a list of floats, extended in place)."""
+        if self.friction is not None:
+            velocity = values[self.friction]
+            if self.decay is not None:
+                velocity = self.low_pass(velocity)
+            values.append(math.tanh(velocity / self.friction_velocity))
+        powers = self.powers
+        for position in self.loads:
+            x = values[position]
+            size = abs(x)
+            for power in powers:
+                values.append(size**power if x >= 0.0 else -(size**power))
+
+    def low_pass(self, velocity):
+        """The filtered velocity of the next row (NaN for a missing one)."""
+        self.since += 1
+        if not math.isfinite(velocity):
+            return math.nan
+        decay, gain, last = self.decay, self.gain, self.filtered
+        # The operations of the batch filter (scipy's lfilter started at ``zi``), in its order.
+        if last is None:
+            last = gain * velocity + decay * velocity
+        elif self.since == 1:
+            last = gain * velocity + decay * last
+        else:
+            lapse = decay**self.since
+            last = gain * velocity + (lapse * last + (decay - lapse) * velocity)
+        self.filtered, self.since = last, 0
+        return last
+
+    def check_time(self, time, groups):
+        """Refuse time stamps whose median step in a recording is not ``sampling_period``
+        (within 1 %), as the step's own transform does."""
+        if self.decay is None or time is None:
+            return
+        check_time_steps(np.asarray(time, dtype=float), as_recordings(groups, len(time)), self)
+
+    def __repr__(self):
+        return f"DerivedInputs({self.n_features_in} -> {self.n_features_out} inputs)"
+
+
+def check_time_steps(time, recordings, step):
+    """Refuse a time level whose median step in a recording is not the ``sampling_period`` of
+    ``step`` (within 1 %): the velocity filter's time constant would be off by their ratio."""
+    period = step.sampling_period
+    for rec, start, stop in zip(recordings.ids, recordings.starts, recordings.stops, strict=True):
+        if stop - start < 2:
+            continue
+        median = float(np.median(np.diff(time[start:stop])))
+        if abs(median - period) > 0.01 * period:
+            raise ValueError(
+                f"The time level of X steps {median:.6g} s (median) in recording {rec!r}, but "
+                f"sampling_period={period!r}: the velocity filter would run "
+                f"{period / median:.3g} times too fast or slow. Pass the "
+                "recordings' own period, or resample them (resample_recordings)."
+            )
+
+
+def stream_capable(step):
+    """Whether a Pipeline step is streamed: it describes itself (or passes rows through)."""
+    return step is None or step == "passthrough" or callable(getattr(step, "stream_settings", None))
+
+
+def read_pipeline(pipeline):
+    """The derived-input stages and the final estimator of a fitted Pipeline.
+
+    Refuses, naming the step, a transformer that does not stream and a final step that is not
+    an estimator with a fitted model; the stages must chain (every step reads the columns the
+    step before it gives).
+    """
+    steps = list(pipeline.steps)
+    if not steps:
+        raise TypeError("FilterStream got a Pipeline without steps")
+    kind = (
+        "FilterStream streams a fitted HMMGMRRegressor, or a fitted Pipeline of SteeringFeatures "
+        "steps ending in one"
+    )
+    for name, step in steps[:-1]:
+        if not stream_capable(step):
+            raise TypeError(
+                f"{kind}; the Pipeline's step {name!r} ({type(step).__name__}) cannot be "
+                "streamed. Stream the regressor alone (pipeline[-1].filter_stream()) on rows "
+                "that went through the other steps, or derive those columns before the fit."
+            )
+    name, final = steps[-1]
+    if final is None or final == "passthrough" or not hasattr(final, "filter_stream"):
+        raise TypeError(
+            f"{kind}; the Pipeline's last step {name!r} ({type(final).__name__}) is not an "
+            "HMMGMRRegressor."
+        )
+    stages = [
+        DerivedInputs(step.stream_settings())
+        for _, step in steps[:-1]
+        if step is not None and step != "passthrough"
+    ]
+    for before, after in zip(stages, stages[1:], strict=False):
+        check_chain(before.n_features_out, before.feature_names_out, after)
+    return stages, (name, final)
+
+
+def check_chain(n_features, names, stage):
+    """Refuse a stage that does not read the ``n_features`` columns (``names``) given to it."""
+    if stage.n_features_in != n_features or (
+        stage.feature_names_in is not None and list(stage.feature_names_in) != list(names)
+    ):
+        raise ValueError(
+            f"A step of the Pipeline reads {stage.n_features_in} inputs "
+            f"{stage.feature_names_in or []} but the step before it gives {n_features} "
+            f"{list(names)}: was the Pipeline fitted as a whole?"
+        )
+
+
+def check_final(stages, n_inputs, names):
+    """Refuse a final model that does not read the columns the last stage gives."""
+    last = stages[-1]
+    if last.n_features_out != n_inputs or (
+        names is not None and list(names) != last.feature_names_out
+    ):
+        raise ValueError(
+            f"The Pipeline's regressor reads {n_inputs} inputs {list(names or [])} but its "
+            f"steps give {last.n_features_out} {last.feature_names_out}: was the Pipeline "
+            "fitted as a whole?"
+        )
