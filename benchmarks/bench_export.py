@@ -8,8 +8,10 @@ filters ``--samples`` samples ``--repeats`` times (reset before every pass), so 
 update holds no Python or ctypes overhead; the best of ``--rounds`` calls is kept. Printed per
 model: the time per update of the C filter without and with the predictive std, in double and
 single precision, of ``FilterStream.update`` (Python, one call per sample), the floating-point
-operations of one update (the arithmetic the filter cannot avoid, an exp counted as one) and
-the rate they run at, and the largest difference of the C estimates from ``predict``
+operations of one update (the arithmetic the filter cannot avoid, an exp counted as one), the
+rate they run at and the time they would take at the peak of the SSE2 code ``-O2`` generates
+for x86-64 (8 double-precision operations per cycle: two 2-wide adds and two 2-wide multiplies;
+the clock read from /proc/cpuinfo), and the largest difference of the C estimates from ``predict``
 (relative to the output's standard deviation). Target: at most 1 us per update at K=8, D=10.
 Run with::
 
@@ -36,6 +38,7 @@ FLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic", "-shared
 STATES = (5, 8, 12)
 INPUTS = (3, 10, 23)
 TARGET_US = 1.0
+FLOPS_PER_CYCLE = 8
 
 LOOP = """
 #include <stddef.h>
@@ -113,6 +116,17 @@ def flops_per_update(n_states, n_inputs, shared=False):
     return standardise + densities + forward + means + mixture
 
 
+def clock_ghz():
+    """The CPU clock [GHz] Linux reports, or None."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("cpu MHz"):
+                return float(line.split(":")[1]) / 1000.0
+    except (OSError, ValueError):
+        pass
+    return None
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--samples", type=int, default=2000, help="samples of one pass")
@@ -124,9 +138,13 @@ def main():
     warnings.simplefilter("ignore", ConvergenceWarning)
     head = (
         f"{'K':>3} {'D':>3} | {'C double':>9} {'+std':>7} {'float32':>8} | {'Python':>8} "
-        f"{'speed-up':>8} | {'flops':>6} {'GFLOP/s':>8} | {'max diff':>9} {'float32':>8}"
+        f"{'speed-up':>8} | {'flops':>6} {'GFLOP/s':>8} {'limit':>6} | {'max diff':>9} "
+        f"{'float32':>8}"
     )
+    ghz = clock_ghz()
     print("time per update [us]; max diff: largest |C - predict| / output std")
+    if ghz is not None:
+        print(f"limit: the flops at {FLOPS_PER_CYCLE} per cycle, {ghz:.2f} GHz [us]")
     print(head)
     print("-" * len(head))
     target = None
@@ -150,10 +168,11 @@ def main():
                 error = np.max(np.abs(estimates - expected)) / scale
                 error32 = np.max(np.abs(estimates32 - expected)) / scale
                 flops = flops_per_update(n_states, n_inputs)
+                limit = "-" if ghz is None else f"{flops / FLOPS_PER_CYCLE / ghz / 1e3:.3f}"
                 print(
                     f"{n_states:>3} {n_inputs:>3} | {plain:9.3f} {with_std:7.3f} "
                     f"{float32:8.3f} | {python:8.2f} {python / plain:7.0f}x | {flops:6d} "
-                    f"{flops / plain / 1e3:8.2f} | {error:9.1e} {error32:8.1e}"
+                    f"{flops / plain / 1e3:8.2f} {limit:>6} | {error:9.1e} {error32:8.1e}"
                 )
                 if (n_states, n_inputs) == (8, 10):
                     target = plain

@@ -33,7 +33,7 @@ FLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "docs" / "user_guide" / "export_c_example.c"
 RTOL = 1e-10
-FLOAT32_RTOL = 1e-3
+FLOAT32_RTOL = 1e-5
 
 LOOP = """
 #include <stddef.h>
