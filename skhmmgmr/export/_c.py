@@ -26,6 +26,7 @@ once. ``dtype="float32"`` runs steps 3-5 in single precision (inputs, standardis
 inputs and the returned values stay in double).
 """
 
+import os
 import textwrap
 from pathlib import Path
 
@@ -602,6 +603,13 @@ def write_c(fitted, directory, *, name="skhmmgmr_model", dtype="float64"):
         raise ValueError(f"directory {str(directory)!r} is not an existing folder.")
     spec = read_filter(fitted)
     paths = (directory / f"{name}.h", directory / f"{name}.c")
-    paths[0].write_text(header(spec, name, dtype))
-    paths[1].write_text(source(spec, name, dtype))
+    texts = (header(spec, name, dtype), source(spec, name, dtype))
+    for path, text in zip(paths, texts, strict=True):
+        # written beside the target and renamed when complete: never a half-written file
+        partial = path.with_name(f".{path.name}.partial")
+        try:
+            partial.write_text(text)
+            os.replace(partial, path)
+        finally:
+            partial.unlink(missing_ok=True)
     return paths
