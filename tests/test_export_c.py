@@ -291,6 +291,13 @@ def test_float32_stays_close_to_predict(protocol, tmp_path):
     assert not codes.any()
     _close(estimates[:, 0], expected, scale, FLOAT32_RTOL)
     _close(stds[:, 0], expected_std, scale, FLOAT32_RTOL)
+    # held samples: those of the double-precision filter
+    X = _corrupted(X, np.random.default_rng(2))
+    held = Compiled(model, tmp_path, name="double").run(X, groups)
+    estimates, stds, codes = compiled.run(X, groups)
+    assert codes.tolist() == held[2].tolist() and codes.any()
+    _close(estimates, held[0], scale, FLOAT32_RTOL)
+    _close(stds, held[1], scale, FLOAT32_RTOL)
 
 
 def test_the_state_is_the_callers_and_the_api_is_as_documented(regressor):
