@@ -130,6 +130,30 @@ def test_fit_predict_round_trip(tmp_path):
     assert np.corrcoef(result["estimate"], result["torque"])[0, 1] > 0.8
 
 
+def test_export_c_writes_the_c_filter_of_a_fitted_model(tmp_path, capsys):
+    path, model = tmp_path / "runs.csv", tmp_path / "model.json"
+    make_recordings().to_csv(path, index=False)
+    argv = ["fit", str(path), "--target", "torque", "--recording", "run", "--time", "t"]
+    assert main([*argv, "--features", "f0", "f1", "--n-states", "2", "--output", str(model)]) == 0
+    folder = tmp_path / "c"
+    folder.mkdir()
+    assert main(["--quiet", "export-c", str(model), str(folder), "--name", "torque"]) == 0
+    header = (folder / "torque.h").read_text()
+    assert "double alpha[2]" in header and "int         torque_update(" in header
+    assert "f0, f1" in header and (folder / "torque.c").is_file()
+    assert main(["--quiet", "export-c", str(model), str(folder), "--name", "torque"]) == 2
+    assert "torque.h exists; pass --overwrite" in capsys.readouterr().err
+    argv = ["--quiet", "export-c", str(model), str(folder), "--name", "torque", "--overwrite"]
+    assert main([*argv, "--float32"]) == 0
+    assert "float alpha[2]" in (folder / "torque.h").read_text()
+    assert main(["export-c", str(model), str(folder), "--name", "2fast"]) == 2
+    assert "--name: name must be a C identifier" in capsys.readouterr().err
+    assert main(["export-c", str(model), str(tmp_path / "nowhere")]) == 2
+    assert "is not an existing folder" in capsys.readouterr().err
+    assert main(["export-c", str(tmp_path / "none.json"), str(folder)]) == 2
+    assert "model file not found" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     "argv, message",
     [
@@ -155,7 +179,7 @@ def test_unknown_driver_style(capsys):
     assert "reckless" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("command", ["demo", "select", "report", "fit", "predict"])
+@pytest.mark.parametrize("command", ["demo", "select", "report", "fit", "predict", "export-c"])
 def test_help_of_every_sub_command(command, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main([command, "--help"])
@@ -186,7 +210,9 @@ def _sub_parsers():
     return {"skhmmgmr": parser, **action.choices}
 
 
-@pytest.mark.parametrize("command", ["skhmmgmr", "demo", "select", "report", "fit", "predict"])
+@pytest.mark.parametrize(
+    "command", ["skhmmgmr", "demo", "select", "report", "fit", "predict", "export-c"]
+)
 def test_help_shows_every_default(command):
     parser = _sub_parsers()[command]
     formatter = parser._get_formatter()

@@ -1,10 +1,11 @@
-"""Command line: ``skhmmgmr demo | select | report | fit | predict`` (``python -m skhmmgmr``)."""
+"""Command line: ``skhmmgmr demo | select | report | fit | predict | export-c``."""
 
 from .._core._public import publish
 from ._commands import (
     DEMO_SCALES,
     build_parser,
     command_demo,
+    command_export_c,
     command_fit,
     command_predict,
     command_report,
@@ -16,6 +17,7 @@ __all__ = [
     "DEMO_SCALES",
     "build_parser",
     "command_demo",
+    "command_export_c",
     "command_fit",
     "command_predict",
     "command_report",

@@ -1,4 +1,5 @@
-"""Command line: ``skhmmgmr demo | select | report | fit | predict`` (``python -m skhmmgmr``).
+"""Command line: ``skhmmgmr demo | select | report | fit | predict | export-c`` (``python -m
+skhmmgmr``).
 
 Errors the user can fix (a missing file or column, unreadable data, an output that would
 overwrite a file) are printed without a traceback and end with exit code 2. Reading inputs and
@@ -364,6 +365,29 @@ def command_predict(args):
     return 0
 
 
+def command_export_c(args):
+    """The C code of a model file written by ``fit`` (:func:`skhmmgmr.export.write_c`)."""
+    from ..export import write_c
+    from ..export._model import check_name
+
+    model = load_model(args.model)
+    folder = Path(args.directory)
+    if not folder.is_dir():
+        raise CommandError(f"{folder} is not an existing folder")
+    try:
+        name = check_name(args.name)
+    except ValueError as exc:
+        raise CommandError(f"--name: {exc}") from exc
+    for suffix in (".h", ".c"):
+        check_output(folder / f"{name}{suffix}", overwrite=args.overwrite, inputs=[args.model])
+    try:
+        header, source = write_c(model, folder, name=name, dtype=args.dtype)
+    except ValueError as exc:
+        raise CommandError(f"{args.model}: {exc}") from exc
+    _log(args, f"Wrote {header} and {source} ({args.dtype})")
+    return 0
+
+
 def _add_data_options(parser, *, file_order=False):
     parser.add_argument("--target", default=TARGET, help="target column")
     parser.add_argument("--recording", default=RECORDING, help="recording-id column")
@@ -497,6 +521,30 @@ def build_parser():
         "state_0, ...), when the data already has columns of those names",
     )
     predict.set_defaults(handler=command_predict)
+
+    export = sub.add_parser(
+        "export-c",
+        help="write a model's causal filter as C99 source (<name>.h, <name>.c)",
+        description="Write the causal filter of a model file as C99 code for embedded targets: "
+        "static parameters, a caller-owned state, no heap; see the user guide, 'C code of a "
+        "fitted model'.",
+        **common,
+    )
+    export.add_argument("model", help="model file (portable JSON) written by 'skhmmgmr fit'")
+    export.add_argument("directory", help="existing folder the two files are written to")
+    export.add_argument("--name", default="skhmmgmr_model", help="C prefix of files and names")
+    export.add_argument(
+        "--float32",
+        dest="dtype",
+        action="store_const",
+        const="float32",
+        default="float64",
+        help="single-precision arithmetic (default: double)",
+    )
+    export.add_argument(
+        "--overwrite", action="store_true", help="replace existing files of that name"
+    )
+    export.set_defaults(handler=command_export_c)
     return parser
 
 

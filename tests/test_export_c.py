@@ -1,0 +1,406 @@
+"""The generated C filter (``skhmmgmr.export.write_c``) against predict and FilterStream.
+
+Every model is exported, compiled once with the system compiler (``-std=c99 -O2 -Wall -Wextra
+-Werror -pedantic``) into a shared library with a small loop over the samples, and run on
+simulated recordings, reset at every recording. Expectations: ``predict`` (estimates and std)
+where no sample is held, :class:`~skhmmgmr.FilterStream` (which holds) on held samples, and for
+the torque pipeline ``SteeringFeatures.transform`` for the derived inputs, velocity filter
+included.
+"""
+
+import ctypes
+import re
+import shutil
+import subprocess
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from sklearn.exceptions import ConvergenceWarning, NotFittedError
+from sklearn.pipeline import Pipeline
+from sklearn.preprocessing import StandardScaler
+
+from skhmmgmr import FilterStream, HMMGMRRegressor, SteeringFeatures, make_torque_pipeline
+from skhmmgmr.datasets import FEATURE_NAMES, make_driving_protocol
+from skhmmgmr.export import write_c
+
+CC = shutil.which("cc")
+pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (cc) on this machine")
+FLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic"]
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "docs" / "user_guide" / "export_c_example.c"
+RTOL = 1e-10
+FLOAT32_RTOL = 1e-5
+
+LOOP = """
+#include <stddef.h>
+#include "NAME.h"
+
+/* Filter n samples, reset where restart[t] is set. */
+void run(int n, const double *inputs, const int *restart, double *estimates, double *stds,
+         int *codes)
+{
+    NAME_state state;
+    int t;
+    NAME_reset(&state);
+    for (t = 0; t < n; ++t) {
+        if (restart[t]) {
+            NAME_reset(&state);
+        }
+        codes[t] = NAME_update(&state, inputs + (size_t)t * NAME_n_inputs(),
+                               estimates + (size_t)t * NAME_n_outputs(),
+                               stds == NULL ? NULL : stds + (size_t)t * NAME_n_outputs());
+    }
+}
+"""
+
+
+class Compiled:
+    """A generated filter compiled into a shared library; :meth:`run` filters recordings."""
+
+    def __init__(self, fitted, folder, name="model", dtype="float64"):
+        self.name = name
+        self.paths = write_c(fitted, folder, name=name, dtype=dtype)
+        (folder / "loop.c").write_text(LOOP.replace("NAME", name))
+        library = folder / f"lib{name}.so"
+        command = [CC, *FLAGS, "-shared", "-fPIC", "-o", str(library)]
+        command += [str(self.paths[1]), str(folder / "loop.c"), "-lm"]
+        result = subprocess.run(command, capture_output=True, text=True)
+        assert result.returncode == 0, result.stderr
+        self.library = ctypes.CDLL(str(library))
+        self.n_inputs = self.function("n_inputs", ctypes.c_int)()
+        self.n_outputs = self.function("n_outputs", ctypes.c_int)()
+
+    def function(self, suffix, restype, *argtypes):
+        function = getattr(self.library, f"{self.name}_{suffix}")
+        function.restype, function.argtypes = restype, argtypes
+        return function
+
+    def run(self, X, recordings, std=True):
+        """Estimates (n, n_outputs), std and return codes of the rows of ``X``."""
+        X = np.ascontiguousarray(X, dtype=float)
+        n = X.shape[0]
+        restart = np.r_[1, np.asarray(recordings)[1:] != np.asarray(recordings)[:-1]]
+        restart = np.ascontiguousarray(restart, dtype=np.intc)
+        estimates = np.empty((n, self.n_outputs))
+        stds = np.empty((n, self.n_outputs)) if std else None
+        codes = np.empty(n, dtype=np.intc)
+        double_p = ctypes.POINTER(ctypes.c_double)
+        int_p = ctypes.POINTER(ctypes.c_int)
+        self.library.run(
+            ctypes.c_int(n),
+            X.ctypes.data_as(double_p),
+            restart.ctypes.data_as(int_p),
+            estimates.ctypes.data_as(double_p),
+            stds.ctypes.data_as(double_p) if std else None,
+            codes.ctypes.data_as(int_p),
+        )
+        return estimates, stds, codes
+
+
+@pytest.fixture(scope="module")
+def protocol():
+    data = make_driving_protocol(
+        ("defensive",),
+        n_train_per_setting=1,
+        n_validation=1,
+        n_test=1,
+        duration=8.0,
+        sampling_rate=20.0,
+        random_state=0,
+    )
+    return data
+
+
+def _fit(model, data, columns, target="driver_torque"):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        return model.fit(data[columns], data[target], groups=data["recording"])
+
+
+def _close(actual, expected, scale, rtol=RTOL):
+    """Largest difference relative to ``|expected| + scale`` (the output's standard scale)."""
+    actual, expected = np.asarray(actual, dtype=float), np.asarray(expected, dtype=float)
+    error = np.max(np.abs(actual - expected) / (np.abs(expected) + scale))
+    assert error <= rtol, error
+    return error
+
+
+# (n_states, covariance_type, inputs, outputs): K from 1 to 12, 1 to 18 raw inputs
+REGRESSORS = {
+    "k1-full": (1, "full", FEATURE_NAMES[:2], ["driver_torque"]),
+    "k3-tied": (3, "tied", FEATURE_NAMES[:4], ["driver_torque"]),
+    "k5-full-2-outputs": (5, "full", FEATURE_NAMES[:3], ["driver_torque", "yaw_rate"]),
+    "k12-full": (12, "full", FEATURE_NAMES[:10], ["driver_torque"]),
+    "k8-tied-18": (8, "tied", list(FEATURE_NAMES), ["driver_torque"]),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(REGRESSORS))
+def regressor(request, protocol, tmp_path_factory):
+    n_states, covariance_type, inputs, outputs = REGRESSORS[request.param]
+    model = HMMGMRRegressor(
+        n_states=n_states, covariance_type=covariance_type, n_iter=15, random_state=0
+    )
+    target = outputs[0] if len(outputs) == 1 else outputs
+    model = _fit(model, protocol, list(inputs), target)
+    folder = tmp_path_factory.mktemp(request.param)
+    return model, list(inputs), Compiled(model, folder)
+
+
+def test_the_c_filter_gives_the_estimates_and_std_of_predict(regressor, protocol):
+    model, inputs, compiled = regressor
+    X, groups = protocol[inputs], protocol["recording"]
+    estimates, stds, codes = compiled.run(X, groups)
+    expected, expected_std = model.predict(X, groups=groups, return_std=True)
+    scale = model.model_.standardization.output_scale
+    assert not codes.any()
+    _close(estimates, np.reshape(expected, estimates.shape), scale)
+    _close(stds, np.reshape(expected_std, stds.shape), scale)
+    assert compiled.n_inputs == len(inputs)
+    assert compiled.n_outputs == model.n_outputs_
+    name = compiled.function("input_name", ctypes.c_char_p, ctypes.c_int)
+    assert [name(i).decode() for i in range(len(inputs))] == inputs
+    assert name(-1) is None and name(len(inputs)) is None
+
+
+def _corrupted(X, rng):
+    """``X`` with NaN, infinite and far outlying samples, a few at the start of recordings."""
+    X = np.array(X, dtype=float)
+    rows = rng.choice(np.arange(1, X.shape[0]), size=30, replace=False)
+    X[rows[:8], 0] = np.nan
+    X[rows[8:12], -1] = np.inf
+    X[rows[12:20]] = X[rows[12:20]] * 1e6
+    X[rows[20:24], 0] = 1e120  # the standardised inputs' absolute sum passes 1e100
+    X[0, 0] = np.nan  # held before any accepted sample: the prior mixture
+    X[1] = X[1] * 1e6
+    return X
+
+
+def test_held_samples_are_those_of_the_filter_stream(regressor, protocol):
+    model, inputs, compiled = regressor
+    X = _corrupted(protocol[inputs], np.random.default_rng(1))
+    groups = protocol["recording"].to_numpy()
+    estimates, stds, codes = compiled.run(X, groups)
+    stream = FilterStream(model)
+    expected, expected_std, flags = [], [], []
+    for row, restart in zip(X, np.r_[True, groups[1:] != groups[:-1]], strict=True):
+        if restart:
+            stream.reset()
+        estimate, std, flag = stream.update(row, return_std=True, return_flag=True)
+        expected.append(estimate)
+        expected_std.append(std)
+        flags.append(flag)
+    flags = np.array(flags)
+    assert {"non-finite", "outlier"} <= set(flags)
+    codes_of = {"ok": 0, "restarted": 0, "non-finite": 1, "outlier": 2}
+    assert codes.tolist() == [codes_of[f] for f in flags]
+    scale = model.model_.standardization.output_scale
+    _close(estimates, np.reshape(expected, estimates.shape), scale)
+    _close(stds, np.reshape(expected_std, stds.shape), scale)
+
+
+def test_a_restart_from_the_input_densities_as_predict_does(tmp_path):
+    # Two regimes that never follow each other (the identity as transition matrix) and whose
+    # densities underflow far from them: a jump between them is impossible, and the filter
+    # restarts from the input densities.
+    rng = np.random.default_rng(0)
+    low, high = rng.normal(-3, 0.05, size=(300, 1)), rng.normal(3, 0.05, size=(300, 1))
+    X = np.vstack([low, high])
+    y = np.where(X[:, 0] < 0, -1.0, 1.0) + X[:, 0] + rng.normal(scale=0.1, size=600)
+    fitted = HMMGMRRegressor(n_states=2, random_state=0).fit(X, y, groups=np.repeat([0, 1], 300))
+    model = HMMGMRRegressor.from_fitted_model(replace(fitted.model_, transmat=np.eye(2)))
+    test = np.vstack([low[:20], high[:20], low[:20]])
+    stream = model.filter_stream()
+    flags = [stream.update(row, return_flag=True)[1] for row in test]
+    assert flags.count("restarted") == 2
+    estimates, stds, codes = Compiled(model, tmp_path).run(test, np.zeros(60))
+    expected, expected_std = model.predict(test, return_std=True)
+    assert not codes.any()
+    _close(estimates[:, 0], expected, model.model_.standardization.output_scale)
+    _close(stds[:, 0], expected_std, model.model_.standardization.output_scale)
+
+
+@pytest.fixture(scope="module")
+def pipeline(protocol, tmp_path_factory):
+    """K=12 over the 18 sensed inputs and the 5 derived ones (23 inputs), velocity filter on."""
+    model = make_torque_pipeline(
+        12, velocity_filter=0.2, sampling_period=0.05, n_iter=10, random_state=0
+    )
+    model = _fit(model, protocol, list(FEATURE_NAMES))
+    folder = tmp_path_factory.mktemp("pipeline")
+    return model, Compiled(model, folder, name="torque")
+
+
+def test_the_pipelines_derived_inputs_and_velocity_filter(pipeline, protocol):
+    model, compiled = pipeline
+    assert model[-1].n_features_in_ == 23
+    X, groups = protocol[list(FEATURE_NAMES)], protocol["recording"]
+    estimates, stds, codes = compiled.run(X, groups)
+    expected, expected_std = model.predict(X, groups=groups, return_std=True)
+    scale = model[-1].model_.standardization.output_scale
+    assert not codes.any()
+    _close(estimates[:, 0], expected, scale)
+    _close(stds[:, 0], expected_std, scale)
+    # one recording for all rows: another velocity filter, other estimates
+    merged, _, _ = compiled.run(X, np.zeros(len(X)))
+    assert np.max(np.abs(merged[:, 0] - expected)) > 1e-6
+
+
+def test_the_pipelines_held_samples_and_velocity_gaps(pipeline, protocol):
+    model, compiled = pipeline
+    features, regressor = model[0], model[-1]
+    X = protocol[list(FEATURE_NAMES)].to_numpy(copy=True)
+    groups = protocol["recording"].to_numpy()
+    velocity = FEATURE_NAMES.index("steering_wheel_velocity")
+    X[[5, 6, 7, 50, 300], velocity] = np.nan  # gaps the velocity filter bridges
+    X[[9, 120], 0] = np.nan
+    X[[30, 31], 0] *= 1e7
+    estimates, stds, codes = compiled.run(X, groups)
+    derived = features.transform(pd.DataFrame(X, columns=FEATURE_NAMES), groups=groups)
+    derived = derived.to_numpy()
+    stream = FilterStream(regressor)
+    expected, flags = [], []
+    for row, restart in zip(derived, np.r_[True, groups[1:] != groups[:-1]], strict=True):
+        if restart:
+            stream.reset()
+        estimate, std, flag = stream.update(row, return_std=True, return_flag=True)
+        expected.append((estimate, std))
+        flags.append(flag)
+    assert codes[[5, 6, 7, 9, 50, 120, 300]].tolist() == [1] * 7
+    assert codes[[30, 31]].tolist() == [2, 2]
+    assert sum(codes != 0) == 9
+    assert [f in ("non-finite", "outlier") for f in flags] == (codes != 0).tolist()
+    scale = regressor.model_.standardization.output_scale
+    _close(estimates[:, 0], [e for e, _ in expected], scale)
+    _close(stds[:, 0], [s for _, s in expected], scale)
+
+
+def test_float32_stays_close_to_predict(protocol, tmp_path):
+    inputs = list(FEATURE_NAMES[:6])
+    model = _fit(HMMGMRRegressor(n_states=6, n_iter=15, random_state=0), protocol, inputs)
+    compiled = Compiled(model, tmp_path, dtype="float32")
+    assert "float alpha[6]" in compiled.paths[0].read_text()
+    X, groups = protocol[inputs], protocol["recording"]
+    estimates, stds, codes = compiled.run(X, groups)
+    expected, expected_std = model.predict(X, groups=groups, return_std=True)
+    scale = model.model_.standardization.output_scale
+    assert not codes.any()
+    _close(estimates[:, 0], expected, scale, FLOAT32_RTOL)
+    _close(stds[:, 0], expected_std, scale, FLOAT32_RTOL)
+    # held samples: those of the double-precision filter
+    X = _corrupted(X, np.random.default_rng(2))
+    held = Compiled(model, tmp_path, name="double").run(X, groups)
+    estimates, stds, codes = compiled.run(X, groups)
+    assert codes.tolist() == held[2].tolist() and codes.any()
+    _close(estimates, held[0], scale, FLOAT32_RTOL)
+    _close(stds, held[1], scale, FLOAT32_RTOL)
+
+
+def test_the_state_is_the_callers_and_the_api_is_as_documented(regressor):
+    model, inputs, compiled = regressor
+    header = compiled.paths[0].read_text()
+    size = compiled.function("state_size", ctypes.c_size_t)()
+    n_states, n_outputs = model.n_states, model.n_outputs_
+    # alpha, prior, means, estimate (doubles) and the started flag
+    assert size >= 8 * (2 * n_states + n_states * n_outputs + n_outputs) + 4
+    for declaration in (
+        "int         model_n_inputs(void);",
+        "int         model_n_outputs(void);",
+        "const char *model_input_name(int i);",
+        "size_t      model_state_size(void);",
+        "void        model_reset(model_state *state);",
+        "int         model_update(model_state *state, const double *inputs,",
+    ):
+        assert declaration in header
+    source = compiled.paths[1].read_text()
+    assert "malloc" not in source and re.findall(r"#include <(\w+)\.h>", source) == [
+        "math",
+        "stddef",
+    ]
+
+
+def test_the_user_guide_program_reads_a_recording_and_prints_the_estimates(
+    regressor, protocol, tmp_path
+):
+    model, inputs, _ = regressor
+    header, source = write_c(model, tmp_path)  # the example's model name: the default
+    program = tmp_path / "estimate"
+    command = [CC, *FLAGS, f"-I{tmp_path}", "-o", str(program), str(EXAMPLE), str(source), "-lm"]
+    result = subprocess.run(command, capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    data = protocol[["recording", *inputs]].iloc[::5]
+    text = data.to_csv(index=False, float_format="%.17g")
+    run = subprocess.run([str(program)], input=text, capture_output=True, text=True, check=True)
+    lines = run.stdout.strip().splitlines()
+    n_outputs = model.n_outputs_
+    columns = [f"estimate_{o}" for o in range(n_outputs)] + [f"std_{o}" for o in range(n_outputs)]
+    assert lines[0].split(",") == [*columns, "code"]
+    values = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
+    expected, expected_std = model.predict(data[inputs], groups=data["recording"], return_std=True)
+    scale = model.model_.standardization.output_scale
+    _close(values[:, :n_outputs], np.reshape(expected, (-1, n_outputs)), scale)
+    _close(values[:, n_outputs:-1], np.reshape(expected_std, (-1, n_outputs)), scale)
+    assert not values[:, -1].any()
+    # a missing input: held, and said so
+    broken = text.replace(
+        text.splitlines()[3],
+        text.splitlines()[3].split(",")[0] + ",nan" + "," * (len(inputs) - 1),
+        1,
+    )
+    run = subprocess.run([str(program)], input=broken, capture_output=True, text=True, check=True)
+    assert run.stdout.splitlines()[3].endswith(",1")
+
+
+def test_refused_at_export_time(protocol, tmp_path):
+    inputs = list(FEATURE_NAMES[:2])
+    with pytest.raises(NotFittedError, match="not fitted"):
+        write_c(HMMGMRRegressor(), tmp_path)
+    with pytest.raises(NotFittedError, match="not fitted"):
+        write_c(make_torque_pipeline(2), tmp_path)
+    marginalizing = _fit(
+        HMMGMRRegressor(n_states=2, n_iter=5, missing_values="marginalize", random_state=0),
+        protocol,
+        inputs,
+    )
+    with pytest.raises(ValueError, match="missing_values='error' only.*'marginalize'"):
+        write_c(marginalizing, tmp_path)
+    model = _fit(HMMGMRRegressor(n_states=2, n_iter=5, random_state=0), protocol, inputs)
+    scaled = Pipeline([("scale", StandardScaler()), ("hmmgmr", model)])
+    with pytest.raises(ValueError, match=r"'scale' \(StandardScaler\) have no C form"):
+        write_c(scaled, tmp_path)
+    with pytest.raises(TypeError, match="HMMGMRRegressor"):
+        write_c(StandardScaler(), tmp_path)
+    for name in ("", "2fast", "my-model", "_model", "modèle", None):
+        with pytest.raises(ValueError, match="C identifier"):
+            write_c(model, tmp_path, name=name)
+    with pytest.raises(ValueError, match="'float64' or 'float32'"):
+        write_c(model, tmp_path, dtype="float16")
+    with pytest.raises(ValueError, match="not an existing folder"):
+        write_c(model, tmp_path / "nowhere")
+    assert list(tmp_path.iterdir()) == []
+    alone = Pipeline([("hmmgmr", model)])
+    assert [p.name for p in write_c(alone, tmp_path)] == ["skhmmgmr_model.h", "skhmmgmr_model.c"]
+
+
+def test_input_names_are_escaped_c_strings(tmp_path):
+    rng = np.random.default_rng(0)
+    X = np.cumsum(rng.normal(size=(200, 2)), axis=0)
+    names = ['angle "quoted" */ \\', "yaw rate °/s"]
+    frame = pd.DataFrame(X, columns=names)
+    model = HMMGMRRegressor(n_states=2, random_state=0).fit(frame, X[:, 0] - X[:, 1])
+    compiled = Compiled(model, tmp_path)
+    name = compiled.function("input_name", ctypes.c_char_p, ctypes.c_int)
+    assert [name(i).decode("utf-8") for i in range(2)] == names
+    features = SteeringFeatures(load_columns=(0,), friction_column=1, powers=(2, 5))
+    pipe = Pipeline([("f", features), ("hmmgmr", HMMGMRRegressor(n_states=2, random_state=0))])
+    pipe.fit(X, X[:, 0] - X[:, 1])
+    compiled = Compiled(pipe, tmp_path, name="arrays")
+    estimates, _, codes = compiled.run(X, np.zeros(200), std=False)
+    assert not codes.any()
+    _close(estimates[:, 0], pipe.predict(X), pipe[-1].model_.standardization.output_scale)
+    name = compiled.function("input_name", ctypes.c_char_p, ctypes.c_int)
+    assert [name(i).decode() for i in range(2)] == ["x0", "x1"]
