@@ -306,10 +306,10 @@ def _model_dict(fitted, *, output_names, units, period):
     steps = []
     for name, step in transformers:
         if type(step) is not SteeringFeatures:
+            what = repr(step) if step is None or isinstance(step, str) else _type_name(step)
             raise TypeError(
-                f"the pipeline's step {name!r} is {_type_name(step) if step is not None else None}"
-                f"; a model file's pipeline holds {STEERING_TYPE} steps followed by an "
-                "HMMGMRRegressor"
+                f"the pipeline's step {name!r} is {what}; a model file's pipeline holds "
+                f"{STEERING_TYPE} steps followed by an HMMGMRRegressor"
             )
         check_is_fitted(step, "n_features_in_")
         steps.append(_steering_dict(name, step))

@@ -284,6 +284,9 @@ def test_save_refuses_what_a_model_file_does_not_hold(data, tmp_path):
     scaled.fit(X, y)
     with pytest.raises(TypeError, match="step 'scale' is sklearn.preprocessing.*StandardScaler"):
         portable.save(scaled, path)
+    skipped = Pipeline([("none", "passthrough"), ("model", HMMGMRRegressor(2, random_state=0))])
+    with pytest.raises(TypeError, match="step 'none' is 'passthrough'; a model file's pipeline"):
+        portable.save(skipped.fit(X, y), path)
     last = Pipeline([("derived", SteeringFeatures()), ("model", LinearRegression())]).fit(X, y)
     with pytest.raises(TypeError, match="last step 'model' is sklearn.linear_model"):
         portable.save(last, path)
