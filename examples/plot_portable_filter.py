@@ -25,8 +25,11 @@ def portable_filter(path, X):
     """Causal HMM-GMR estimates and stds of one recording ``X`` from a portable model file."""
     with open(path, encoding="utf-8") as file:
         model = json.load(file)
-    if model["format"] != "skhmmgmr-hmm-gmr" or model["format_version"] != 1:
-        raise ValueError("not a skhmmgmr-hmm-gmr model file of format version 1")
+    if model["format"] != "skhmmgmr-hmm-gmr" or model["format_version"] not in (1, 2):
+        raise ValueError("not a skhmmgmr-hmm-gmr model file of format version 1 or 2")
+    if model.get("model_type", "HMMGMRRegressor") != "HMMGMRRegressor":
+        # a pipeline: its last step holds the regressor, whose inputs the steps before derive
+        raise ValueError(f"{model['model_type']}: this filter reads a regressor's file")
     scaling, params = model["standardization"], model["filter"]
     start = np.array(params["start_probabilities"])
     transition = np.array(params["transition_matrix"])

@@ -1,9 +1,32 @@
-"""Portable model file: a fitted HMM-GMR model as plain JSON, readable without skhmmgmr.
+"""Portable model file: any fitted model of the package as plain JSON, readable without it.
 
-The file is one JSON object (format ``"skhmmgmr-hmm-gmr"``, ``format_version`` 1). Keys:
+:func:`save` writes a fitted :class:`~skhmmgmr.HMMGMRRegressor`, or a fitted pipeline of
+:class:`~skhmmgmr.SteeringFeatures` steps followed by one (the
+:class:`~skhmmgmr.torque_pipeline.TorquePipeline` of :func:`~skhmmgmr.make_torque_pipeline`,
+or a scikit-learn :class:`~sklearn.pipeline.Pipeline` of the same steps); :func:`load` reads it
+back, predicting bit for bit as the saved object. The regressor's
+:meth:`~skhmmgmr.HMMGMRRegressor.export_json` and
+:meth:`~skhmmgmr.HMMGMRRegressor.from_json` are the regressor's shortcuts for the same files.
+A file is read as data, never run; :func:`json_schema` returns the JSON Schema (draft 2020-12)
+of the format, shipped with the package (``skhmmgmr/portable_schema.json``).
+
+The file is one JSON object. Its header, for every kind of model:
 
 ``format``, ``format_version``, ``package_version``
-    What the file is and which skhmmgmr wrote it. Readers reject other format versions.
+    What the file is (``"skhmmgmr-hmm-gmr"``), the version of the format (2; version 1,
+    written by skhmmgmr 0.1.0, held the regressor without ``model_type`` and ``training``, and
+    still loads) and which skhmmgmr wrote it. Readers refuse newer format versions.
+``model_type``
+    ``"HMMGMRRegressor"``, ``"TorquePipeline"`` or ``"Pipeline"`` (absent in version 1: a
+    regressor).
+``training`` (optional)
+    Facts about the training data that predictions read: ``longest_recording`` (rows of the
+    longest training recording, or null: ``predict`` warns above it without recordings; the
+    estimator's ``longest_recording_``), ``sampling_period`` (seconds between two rows, when
+    known) and ``units`` (input or output name -> unit text, those known).
+
+A regressor's file (``model_type`` ``"HMMGMRRegressor"``) holds next to the header:
+
 ``n_states``, ``n_inputs``, ``n_outputs``
     ``K``, ``F`` and ``O``.
 ``feature_names`` (F strings), ``feature_names_from_fit`` (bool)
@@ -39,6 +62,25 @@ The file is one JSON object (format ``"skhmmgmr-hmm-gmr"``, ``format_version`` 1
     ``log_likelihood_history``, ``penalized_log_likelihood``,
     ``penalized_log_likelihood_history``, ``n_iter`` and ``converged``.
 
+A pipeline's file (``model_type`` ``"TorquePipeline"`` or ``"Pipeline"``) holds next to the
+header (its ``training``: the sampling period and the units of the raw inputs) ``steps``, the
+steps in order, each an object with ``name`` (the step's name in the pipeline) and ``type``:
+
+- ``"SteeringFeatures"`` steps, first: ``params`` (``friction_velocity``, ``friction_column``,
+  ``load_columns``, ``powers``, ``velocity_filter``, ``sampling_period``: the transformer's
+  parameters) and its fitted facts ``n_features_in`` and ``feature_names_in`` (the input
+  columns, or null when fitted on an array). The step appends to its inputs, in this order:
+  ``steering_friction = tanh(v / friction_velocity)`` (unless ``friction_velocity`` is null)
+  with ``v`` the column ``friction_column``, and for every column ``x`` of ``load_columns``
+  and every ``p`` of ``powers`` ``sign(x) |x|^p`` (named ``<x>_signed_square``, ``<x>_cube``,
+  ``<x>_signed_power<p>``; columns are names, or positions when ``feature_names_in`` is
+  null). With ``velocity_filter`` ``tau``, ``v`` is
+  the velocity through ``y_t = d y_(t-1) + (1 - d) x_t``, ``d = exp(-sampling_period /
+  tau)``, restarted at every recording at its first observed value; after ``g`` missing
+  values the next one ``x`` enters as ``y = d^(g+1) y_last + (1 - d^(g+1)) x``.
+- one ``"HMMGMRRegressor"`` step, last: ``model``, a regressor's file as above (its own
+  header included), whose inputs are the outputs of the steps before it.
+
 The filter (METHOD.md section 2): ``alpha_1 ∝ pi * b(z_1)``, ``alpha_t ∝ (alpha_{t-1} @ A) *
 b(z_t)``, estimate ``sum_k alpha_t,k m_k(z_t)``, where ``b_k`` is the Gaussian density of the
 input marginal; densities are taken relative to the largest one, and if every product
@@ -53,437 +95,412 @@ value ``c`` in the recording is ``g`` samples old (``0 < g <= max(lags)``) is ob
 ``P_mm + diag(1 / v)`` in the formulas above, ``z_m = mu_m + (P_mm + diag(1/v))^-1 (diag(1/v)
 (c - mu_m) - P_mo (z_o - mu_o))``, and ``b_k`` gains the density of ``c`` given ``z_o``.
 
-:class:`~skhmmgmr.HMMGMRRegressor`'s ``to_dict``, ``export_json``, ``from_dict`` and
-``from_json`` delegate to this module (:func:`estimator_to_dict`, :func:`export_json`,
-:func:`estimator_from_dict`, :func:`estimator_from_json`): the estimator's parameters and fit
-information travel with the model.
+Reading refuses, with a message naming the key (and the file): a missing key, a value of the
+wrong kind or shape, a format version that is not a whole number from 1 to
+:data:`FORMAT_VERSION`, an unknown ``model_type`` or step ``type``, inconsistent parts (a
+``filter`` block that does not match ``joint``, a step whose outputs are not the next step's
+inputs) and parameters the estimators refuse.
 """
 
 import json
 import math
-from dataclasses import dataclass
-from numbers import Integral
+import numbers
+from importlib.resources import files
 
-import numpy as np
+from sklearn.pipeline import Pipeline
 from sklearn.utils.validation import check_is_fitted
 
 from ._core._compat import InvalidParameterError
-from ._hmm._emissions import emission_family
-from ._hmm._fitted import FittedHMMGMR, Standardization
-from ._hmm._gaussian import NotPositiveDefiniteError
-from ._hmm._stale_inputs import MAX_LAG, StaleInputNoise
+from ._core._public import publish
+from ._hmm._portable import (
+    FIT_INFO_KEYS,
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    REGRESSOR_TYPE,
+    PortableModel,
+    export_json,
+    load_json,
+    read_header,
+    read_model,
+    read_training,
+    to_dict,
+)
 from ._version import __version__
+from .estimator import HMMGMRRegressor
+from .torque_pipeline import SteeringFeatures, TorquePipeline, restore_steering_features
 
 __all__ = [
     "FIT_INFO_KEYS",
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "MODEL_TYPES",
     "PortableModel",
     "export_json",
+    "json_schema",
+    "load",
     "load_json",
     "read_model",
+    "save",
     "to_dict",
 ]
 
-FORMAT_NAME = "skhmmgmr-hmm-gmr"
-FORMAT_VERSION = 1
-
-_FILTER_SHAPES = {
-    "start_probabilities": ("K",),
-    "transition_matrix": ("K", "K"),
-    "input_means": ("K", "F"),
-    "input_precision_cholesky": ("K", "F", "F"),
-    "regression_coefficients": ("K", "O", "F"),
-    "regression_intercepts": ("K", "O"),
-    "conditional_covariances": ("K", "O", "O"),
+#: The classes a model file holds, by their ``model_type``.
+MODEL_TYPES = {
+    REGRESSOR_TYPE: HMMGMRRegressor,
+    "TorquePipeline": TorquePipeline,
+    "Pipeline": Pipeline,
 }
-_STANDARDIZATION_SHAPES = {
-    "input_center": ("F",),
-    "input_scale": ("F",),
-    "output_center": ("O",),
-    "output_scale": ("O",),
-}
-_JOINT_SHAPES = {"means": ("K", "D"), "covariances": ("K", "D", "D")}
+STEERING_TYPE = "SteeringFeatures"
+STEERING_PARAMS = (
+    "friction_velocity",
+    "friction_column",
+    "load_columns",
+    "powers",
+    "velocity_filter",
+    "sampling_period",
+)
+SCHEMA_FILE = "portable_schema.json"
 
 
-def to_dict(model, *, estimator_params=None, fit_info=None, output_names=None):
-    """JSON-ready dict of a :class:`~skhmmgmr.FittedHMMGMR`; see the module docstring.
+def save(fitted, path, *, output_names=None, units=None, sampling_period=None):
+    """Write a fitted regressor or torque pipeline to one portable JSON file.
 
-    ``estimator_params`` (the estimator's ``get_params()``) and ``fit_info`` (log-likelihood,
-    histories, iterations) are stored as given.
+    Parameters
+    ----------
+    fitted : HMMGMRRegressor, TorquePipeline or Pipeline
+        Fitted. A pipeline's steps are :class:`~skhmmgmr.SteeringFeatures` steps followed by
+        one :class:`~skhmmgmr.HMMGMRRegressor` (as :func:`~skhmmgmr.make_torque_pipeline`
+        makes); anything else is refused, naming the step or the type.
+    path : str or path-like
+        The file to write (strict JSON, UTF-8).
+    output_names : list of str, default=None
+        Names of the outputs; ``output_0``, ... when None.
+    units : dict, default=None
+        Unit text of inputs (the columns the model takes) or outputs, by name, stored in
+        ``training.units``.
+    sampling_period : float, default=None
+        Seconds between two rows of the training recordings, stored in
+        ``training.sampling_period``; ``None``: the ``sampling_period`` of a
+        :class:`~skhmmgmr.SteeringFeatures` step if it has one, else unknown.
+
+    Raises
+    ------
+    TypeError
+        If ``fitted`` is not one of the models above; the message names the type or step.
+    ValueError
+        If a ``units`` name is not an input or output of the model, or a fitted value is not
+        finite.
+
+    See Also
+    --------
+    load : Read the file back.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> import numpy as np
+    >>> from skhmmgmr import make_torque_pipeline, portable
+    >>> from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping
+    >>> data = make_lane_keeping(30.0, sampling_rate=20.0, random_state=0)
+    >>> X, y = data[list(FEATURE_NAMES)], data["driver_torque"]
+    >>> pipe = make_torque_pipeline(2, random_state=0).fit(X, y)
+    >>> path = os.path.join(tempfile.mkdtemp(), "torque.json")
+    >>> portable.save(pipe, path, output_names=["driver_torque"])
+    >>> bool(np.array_equal(portable.load(path).predict(X), pipe.predict(X)))
+    True
     """
+    export_json(
+        _model_dict(fitted, output_names=output_names, units=units, period=sampling_period), path
+    )
 
-    gmr, scaling = model.gmr, model.standardization
-    n_inputs, n_outputs = model.n_inputs, model.n_outputs
-    if output_names is None:
-        output_names = [f"output_{i}" for i in range(n_outputs)]
-    output_names = [str(name) for name in output_names]
-    if len(output_names) != n_outputs:
-        raise ValueError(f"output_names has {len(output_names)} names for {n_outputs} output(s)")
-    named = model.feature_names is not None
-    feature_names = model.feature_names if named else [f"x{i}" for i in range(n_inputs)]
-    estimator_params = dict(estimator_params or {})
-    if not isinstance(estimator_params.get("random_state"), Integral | None):
-        estimator_params["random_state"] = None
-    data = {
+
+def load(path, *, return_training=False):
+    """Read a portable model file written by :func:`save`, ``export_json`` or skhmmgmr 0.1.0.
+
+    Parameters
+    ----------
+    path : str or path-like
+    return_training : bool, default=False
+        Also return the file's facts about the training data.
+
+    Returns
+    -------
+    model : HMMGMRRegressor, TorquePipeline or Pipeline
+        Fitted, of the saved class; predicts bit for bit as the saved model.
+    training : dict
+        With ``return_training``: ``longest_recording``, ``sampling_period`` and ``units``,
+        those the file holds (none for a file of format version 1).
+
+    Raises
+    ------
+    ValueError
+        If the file is not valid JSON or not a valid model file: the message names the file
+        and what is wrong (the key, the format version, the unknown type or step).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> import numpy as np
+    >>> from skhmmgmr import HMMGMRRegressor, portable
+    >>> X = np.cumsum(np.random.default_rng(0).normal(size=(200, 2)), axis=0)
+    >>> model = HMMGMRRegressor(n_states=2, random_state=0).fit(X, X.sum(axis=1))
+    >>> path = os.path.join(tempfile.mkdtemp(), "model.json")
+    >>> portable.save(model, path)
+    >>> restored, training = portable.load(path, return_training=True)
+    >>> bool(np.array_equal(restored.predict(X), model.predict(X)))
+    True
+    >>> training
+    {}
+    """
+    data = load_json(path)
+    try:
+        model, training = _model_from_dict(data)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from exc
+    return (model, training) if return_training else model
+
+
+def json_schema():
+    """The JSON Schema (draft 2020-12) of the portable model file, every format version.
+
+    Returns
+    -------
+    schema : dict
+        The schema shipped with the package (``skhmmgmr/portable_schema.json``): validate a
+        file with any JSON Schema validator. It checks the keys, their kinds and the
+        structure; the equal sizes of arrays across keys and the numerical checks are
+        :func:`load`'s.
+
+    Examples
+    --------
+    >>> from skhmmgmr import portable
+    >>> portable.json_schema()["$schema"]
+    'https://json-schema.org/draft/2020-12/schema'
+    """
+    return json.loads((files(__package__) / SCHEMA_FILE).read_text(encoding="utf-8"))
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+# --------------------------------------------------------------------------------------------
+
+
+def _type_name(value):
+    kind = type(value)
+    return f"{kind.__module__}.{kind.__qualname__}"
+
+
+def _model_dict(fitted, *, output_names, units, period):
+    if type(fitted) is HMMGMRRegressor:
+        data = fitted.to_dict(output_names=output_names)
+        names = [*data["feature_names"], *data["output_names"]]
+        data["training"] = _training(data["training"], units, period, names)
+        return data
+    model_type = next((name for name, cls in MODEL_TYPES.items() if type(fitted) is cls), None)
+    if model_type is None:
+        raise TypeError(
+            f"a model file holds an HMMGMRRegressor, a TorquePipeline or a Pipeline of "
+            f"SteeringFeatures steps and an HMMGMRRegressor; got {_type_name(fitted)}"
+        )
+    *transformers, (last_name, regressor) = fitted.steps
+    steps = []
+    for name, step in transformers:
+        if type(step) is not SteeringFeatures:
+            what = repr(step) if step is None or isinstance(step, str) else _type_name(step)
+            raise TypeError(
+                f"the pipeline's step {name!r} is {what}; a model file's pipeline holds "
+                f"{STEERING_TYPE} steps followed by an HMMGMRRegressor"
+            )
+        check_is_fitted(step, "n_features_in_")
+        steps.append(_steering_dict(name, step))
+    if type(regressor) is not HMMGMRRegressor:
+        raise TypeError(
+            f"the pipeline's last step {last_name!r} is {_type_name(regressor)}, not an "
+            "HMMGMRRegressor"
+        )
+    model = regressor.to_dict(output_names=output_names)
+    steps.append({"name": str(last_name), "type": REGRESSOR_TYPE, "model": model})
+    if period is None:
+        periods = [step.sampling_period for _, step in transformers]
+        period = next((p for p in periods if p is not None), None)
+    names = [*_inputs_of(steps[0]), *model["output_names"]]
+    return {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
         "package_version": __version__,
-        "n_states": int(model.n_states),
-        "n_inputs": int(n_inputs),
-        "n_outputs": int(n_outputs),
-        "feature_names": [str(name) for name in feature_names],
-        "feature_names_from_fit": named,
-        "output_names": output_names,
-        "target_ndim": 1 if model.scalar_output else 2,
-        "standardization": {
-            "input_center": scaling.input_center,
-            "input_scale": scaling.input_scale,
-            "output_center": scaling.output_center,
-            "output_scale": scaling.output_scale,
-        },
-        "filter": {
-            "start_probabilities": model.startprob,
-            "transition_matrix": model.transmat,
-            "input_means": gmr.gating.means,
-            "input_precision_cholesky": gmr.gating.whitening(),
-            "regression_coefficients": gmr.coef,
-            "regression_intercepts": gmr.intercept,
-            "conditional_covariances": gmr.conditional_covariances,
-        },
-        "joint": model.data_emissions.portable_joint(),
-        "estimator_params": estimator_params,
-        "fit_info": dict(fit_info or {}),
+        "model_type": model_type,
+        "training": _training({}, units, period, names),
+        "steps": steps,
     }
-    if model.stale_noise is not None:
-        variances = model.stale_noise.variances
-        data["stale_inputs"] = {
-            "lags": model.stale_noise.lags,
-            "variances": np.where(np.isfinite(variances), variances, None),
-        }
-    return _to_plain(data, "")
 
 
-def _to_plain(value, key):
-    """NumPy arrays and scalars to lists and Python numbers; refuse non-finite numbers."""
-    if isinstance(value, dict):
-        return {name: _to_plain(item, f"{key}.{name}".lstrip(".")) for name, item in value.items()}
-    if isinstance(value, np.ndarray | list | tuple):
-        array = np.asarray(value)
-        if array.dtype.kind == "f" and not np.isfinite(array).all():
-            raise ValueError(f"cannot export {key!r}: it holds NaN or infinite values")
-        return array.tolist()
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        raise ValueError(f"cannot export {key!r}: it is {value}")
-    return value
+def _inputs_of(step):
+    """Input names of a step's block (positional ``x0``... without names)."""
+    if step["type"] == REGRESSOR_TYPE:
+        return step["model"]["feature_names"]
+    names = step["feature_names_in"]
+    return names if names is not None else [f"x{i}" for i in range(step["n_features_in"])]
 
 
-def export_json(data, path):
-    """Write a :func:`to_dict` dict to ``path`` as strict JSON (no NaN tokens)."""
-    text = json.dumps(data, indent=1, allow_nan=False)
-    with open(path, "w", encoding="utf-8") as file:
-        file.write(text + "\n")
+def _training(block, units, period, names):
+    block = dict(block)
+    if units is not None:
+        block["units"] = {str(name): str(unit) for name, unit in dict(units).items()}
+    if period is not None:
+        block["sampling_period"] = float(period)
+    read_training(block, names)
+    return block
 
 
-def load_json(path):
-    """Read a portable model file into a dict, rejecting invalid JSON and NaN tokens."""
-
-    def reject(token):
-        raise ValueError(f"{path}: the number {token} is not valid JSON (non-finite value)")
-
-    try:
-        with open(path, encoding="utf-8") as file:
-            text = file.read()
-    except UnicodeDecodeError as exc:
-        raise ValueError(f"{path} is not a JSON text file (UTF-8): {exc}") from None
-    try:
-        return json.loads(text, parse_constant=reject)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path} is not a valid JSON file: {exc}") from exc
-    except RecursionError:
-        raise ValueError(f"{path}: the JSON is nested too deeply for a model file") from None
-    except ValueError as exc:  # such as an integer of thousands of digits
-        raise ValueError(f"{path} is not a valid model file: {exc}") from None
+def _plain(value):
+    """A parameter's value as JSON: lists for tuples, Python numbers for NumPy ones."""
+    if isinstance(value, list | tuple):
+        return [_plain(item) for item in value]
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return value
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    if isinstance(value, numbers.Real):
+        if not math.isfinite(value):
+            raise ValueError(f"cannot export the parameter value {value}")
+        return float(value)
+    raise TypeError(f"cannot export the parameter value {value!r} of type {_type_name(value)}")
 
 
-# Fit information the JSON format keeps, as the estimator's attributes (name + "_").
-FIT_INFO_KEYS = (
-    "log_likelihood",
-    "log_likelihood_history",
-    "penalized_log_likelihood",
-    "penalized_log_likelihood_history",
-    "n_iter",
-    "converged",
-)
+def _steering_dict(name, step):
+    names = getattr(step, "feature_names_in_", None)
+    return {
+        "name": str(name),
+        "type": STEERING_TYPE,
+        "params": {key: _plain(getattr(step, key)) for key in STEERING_PARAMS},
+        "n_features_in": int(step.n_features_in_),
+        "feature_names_in": None if names is None else [str(n) for n in names],
+    }
 
 
-_HISTORIES = ("log_likelihood_history", "penalized_log_likelihood_history")
+# --------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------
 
 
-def estimator_to_dict(estimator, *, output_names=None):
-    """:func:`to_dict` of a fitted estimator's ``model_``, with its ``get_params()`` and
-    fit information (:data:`FIT_INFO_KEYS`, the attributes ``name + "_"``)."""
-    check_is_fitted(estimator)
-    return to_dict(
-        estimator.model_,
-        estimator_params=estimator.get_params(),
-        fit_info={key: getattr(estimator, key + "_", None) for key in FIT_INFO_KEYS},
-        output_names=output_names,
-    )
+def _require(block, key, where):
+    if key not in block:
+        raise ValueError(f"the model file lacks the key '{where}{key}'")
+    return block[key]
 
 
-def estimator_from_dict(cls, data):
-    """A fitted estimator of class ``cls`` restored from :func:`to_dict` output: its
-    ``from_fitted_model`` with the stored parameters, then the stored fit information."""
-    portable = read_model(data)
-    try:
-        estimator = cls.from_fitted_model(portable.model, **portable.estimator_params)
-    except InvalidParameterError as exc:
-        raise ValueError(f"'estimator_params' holds a value fit refuses: {exc}") from exc
-    except TypeError as exc:
-        raise ValueError(f"'estimator_params' holds an unknown parameter: {exc}") from exc
-    for key, value in portable.fit_info.items():
-        setattr(estimator, key + "_", np.asarray(value, float) if key in _HISTORIES else value)
-    return estimator
-
-
-def estimator_from_json(cls, path):
-    """A fitted estimator of class ``cls`` restored from a model file (its ``from_dict``);
-    an error names the file."""
-    data = load_json(path)
-    try:
-        return cls.from_dict(data)
-    except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from exc
-
-
-@dataclass(frozen=True)
-class PortableModel:
-    """What a model file holds: the model, the estimator's parameters and its fit info."""
-
-    model: FittedHMMGMR
-    estimator_params: dict
-    fit_info: dict
-
-
-def read_model(data):
-    """:class:`PortableModel` restored from :func:`to_dict` output (validated)."""
+def _model_from_dict(data):
+    """(fitted model, training facts) of a model file's dict."""
     if not isinstance(data, dict):
+        raise ValueError(f"a model file must be a JSON object, got {type(data).__name__}")
+    version = read_header(data)
+    model_type = REGRESSOR_TYPE if version == 1 else _require(data, "model_type", "")
+    if model_type not in MODEL_TYPES:
         raise ValueError(
-            f"a portable HMM-GMR model must be a JSON object, got {type(data).__name__}"
+            f"'model_type' is {model_type!r:.100}; this version of skhmmgmr reads "
+            f"{sorted(MODEL_TYPES)}"
         )
-    if _require(data, "format") != FORMAT_NAME:
-        raise ValueError(f"'format' is {data['format']!r}, expected {FORMAT_NAME!r}")
-    version = _require(data, "format_version")
-    if version != FORMAT_VERSION:
-        raise ValueError(
-            f"'format_version' is {version!r}; this version of skhmmgmr reads format version "
-            f"{FORMAT_VERSION} only"
-        )
-    dims = {"K": _count(data, "n_states"), "F": _count(data, "n_inputs")}
-    dims["O"] = _count(data, "n_outputs")
-    dims["D"] = dims["F"] + dims["O"]
-    feature_names = _names(data, "feature_names", dims["F"])
-    _names(data, "output_names", dims["O"])
-    named = _require(data, "feature_names_from_fit")
-    target_ndim = _require(data, "target_ndim")
-    if not isinstance(named, bool):
-        raise ValueError("'feature_names_from_fit' must be true or false")
-    if target_ndim not in (1, 2) or (target_ndim == 1 and dims["O"] != 1):
-        raise ValueError(f"'target_ndim' is {target_ndim!r}; it must be 1 (one output) or 2")
-    scaling = _arrays(data, "standardization", _STANDARDIZATION_SHAPES, dims)
-    filtering = _arrays(data, "filter", _FILTER_SHAPES, dims)
-    joint = _arrays(data, "joint", _JOINT_SHAPES, dims)
-    for key in ("input_scale", "output_scale"):
-        if np.any(scaling[key] <= 0):
-            raise ValueError(f"'standardization.{key}' must be positive")
-    _check_probabilities(filtering["start_probabilities"], "filter.start_probabilities")
-    _check_probabilities(filtering["transition_matrix"], "filter.transition_matrix")
-    standardization = Standardization(
-        np.concatenate([scaling["input_center"], scaling["output_center"]]),
-        np.concatenate([scaling["input_scale"], scaling["output_scale"]]),
-        dims["F"],
-    )
-    _check_joint_covariances(joint["covariances"])
-    emissions = _joint_emissions(data["joint"], joint)
-    try:
-        model = FittedHMMGMR(
-            filtering["start_probabilities"],
-            filtering["transition_matrix"],
-            emissions,
-            standardization,
-            scalar_output=target_ndim == 1,
-            feature_names=feature_names if named else None,
-            stale_noise=_stale_noise(data.get("stale_inputs"), dims["F"]),
-        )
-    except (NotPositiveDefiniteError, np.linalg.LinAlgError) as exc:
-        raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
-    _check_filter_matches_joint(filtering, model)
-    _check_conditional_covariances(model)
+    if model_type == REGRESSOR_TYPE:
+        model = HMMGMRRegressor.from_dict(data)
+        names = [*data["feature_names"], *data["output_names"]]
+        return model, read_training(data.get("training"), names)
+    return _pipeline_from_dict(data, MODEL_TYPES[model_type])
 
-    params = _require(data, "estimator_params")
+
+def _pipeline_from_dict(data, cls):
+    blocks = _require(data, "steps", "")
+    if not isinstance(blocks, list) or not blocks:
+        raise ValueError("'steps' must be a non-empty list of steps")
+    steps, previous = [], None
+    for index, block in enumerate(blocks):
+        where = f"steps[{index}]"
+        if not isinstance(block, dict):
+            raise ValueError(f"'{where}' must be a JSON object")
+        name = _require(block, "name", f"{where}.")
+        if not isinstance(name, str) or not name or "__" in name:
+            raise ValueError(f"'{where}.name' must be a step name (text without '__')")
+        if name in {n for n, _ in steps}:
+            raise ValueError(f"'{where}.name' {name!r} names two steps")
+        kind = _require(block, "type", f"{where}.")
+        last = index == len(blocks) - 1
+        expected = REGRESSOR_TYPE if last else STEERING_TYPE
+        if kind != expected:
+            known = f"{STEERING_TYPE!r} steps followed by one {REGRESSOR_TYPE!r}"
+            raise ValueError(
+                f"'{where}.type' is {kind!r:.100}, expected {expected!r}: a pipeline's steps "
+                f"are {known}"
+            )
+        if last:
+            step = _regressor_step(_require(block, "model", f"{where}."), where)
+        else:
+            step = _steering_step(block, where)
+        if previous is not None:
+            _check_chain(previous, step, where)
+        steps.append((name, step))
+        previous = step
+    first = steps[0][1]
+    names = getattr(first, "feature_names_in_", None)
+    names = list(names) if names is not None else [f"x{i}" for i in range(first.n_features_in_)]
+    regressor = steps[-1][1]
+    outputs = blocks[-1]["model"]["output_names"]
+    training = read_training(data.get("training"), [*names, *outputs])
+    longest = regressor.longest_recording_
+    if longest is not None:
+        training = {"longest_recording": longest, **training}
+    return cls(steps), training
+
+
+def _regressor_step(model, where):
+    try:
+        return HMMGMRRegressor.from_dict(model)
+    except ValueError as exc:
+        raise ValueError(f"in '{where}.model': {exc}") from exc
+
+
+def _steering_step(block, where):
+    params = _require(block, "params", f"{where}.")
     if not isinstance(params, dict):
-        raise ValueError("'estimator_params' must be a JSON object")
-    fit_info = data.get("fit_info") or {}
-    if not isinstance(fit_info, dict):
-        raise ValueError("'fit_info' must be a JSON object")
-    fit_info = {key: fit_info[key] for key in FIT_INFO_KEYS if fit_info.get(key) is not None}
-    for key in ("log_likelihood_history", "penalized_log_likelihood_history"):
-        if key in fit_info:
-            history = fit_info[key]
-            if not isinstance(history, list) or not all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) for v in history
-            ):
-                raise ValueError(f"'fit_info.{key}' must be a list of numbers")
-    return PortableModel(model, params, fit_info)
-
-
-def _stale_noise(block, n_inputs):
-    if block is None:
-        return None
-    problem = (
-        "'stale_inputs' must be an object holding 'lags' (a list of whole numbers) and "
-        "'variances' (a list of lists of numbers or null, one list per input)"
-    )
-    if not isinstance(block, dict) or not isinstance(block.get("lags"), list):
-        raise ValueError(problem)
-    lags = block["lags"]
-    if not all(isinstance(lag, int) and not isinstance(lag, bool) for lag in lags):
-        raise ValueError(f"'stale_inputs.lags' must hold whole numbers, got {lags!r:.200}")
-    if not all(1 <= lag <= MAX_LAG for lag in lags):
-        raise ValueError(f"'stale_inputs.lags' must lie in [1, {MAX_LAG}], got {lags!r:.200}")
+        raise ValueError(f"'{where}.params' must be a JSON object")
+    unknown = sorted(set(params) - set(STEERING_PARAMS))
+    if unknown:
+        raise ValueError(f"'{where}.params' holds the unknown parameter(s) {unknown}")
+    for key in STEERING_PARAMS:
+        _require(params, key, f"{where}.params.")
+    values = {
+        key: tuple(value) if isinstance(value, list) else value for key, value in params.items()
+    }
+    n_features = _require(block, "n_features_in", f"{where}.")
+    if isinstance(n_features, bool) or not isinstance(n_features, int) or n_features < 1:
+        raise ValueError(f"'{where}.n_features_in' must be a positive integer")
+    names = _require(block, "feature_names_in", f"{where}.")
+    if names is not None and (
+        not isinstance(names, list)
+        or len(names) != n_features
+        or not all(isinstance(n, str) for n in names)
+        or len(set(names)) != len(names)
+    ):
+        raise ValueError(f"'{where}.feature_names_in' must be null or {n_features} distinct names")
     try:
-        variances = np.array(block["variances"], dtype=float)  # null -> NaN
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{problem} ({exc})") from None
-    noise = StaleInputNoise(
-        np.array(lags, dtype=np.int64), np.where(np.isnan(variances), np.inf, variances)
-    )
-    try:
-        return noise.frozen(n_inputs)
-    except ValueError as exc:
-        raise ValueError(f"'stale_inputs' is not usable: {exc}") from None
+        return restore_steering_features(values, n_features, names)
+    except (InvalidParameterError, TypeError, ValueError) as exc:
+        raise ValueError(f"'{where}' holds a SteeringFeatures that fit refuses: {exc}") from exc
 
 
-def _joint_emissions(block, joint):
-    """The emission model of the ``joint`` block: its family checks that the covariances
-    have its form."""
-    try:
-        family = emission_family(block.get("covariance_type", "full"))
-    except ValueError as exc:
-        raise ValueError(f"'joint.covariance_type': {exc}") from exc
-    try:
-        return family.from_state_covariances(joint["means"], joint["covariances"])
-    except NotPositiveDefiniteError as exc:
-        raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
-    except ValueError as exc:
-        raise ValueError(f"'joint.covariances' {exc}") from exc
+def _check_chain(previous, step, where):
+    """The outputs of ``previous`` must be the inputs of ``step``: as many, and the same
+    names when both have names."""
+    out = list(previous.get_feature_names_out())
+    named = hasattr(previous, "feature_names_in_")
+    if step.n_features_in_ != len(out):
+        raise ValueError(
+            f"'{where}' takes {step.n_features_in_} input(s), but the step before it gives "
+            f"{len(out)}: {out}"
+        )
+    names = getattr(step, "feature_names_in_", None)
+    if named and names is not None and list(names) != out:
+        raise ValueError(
+            f"'{where}' takes the inputs {list(names)}, but the step before it gives {out}"
+        )
 
 
-def _check_joint_covariances(covariances):
-    """Every state's joint covariance must be symmetric and positive definite: the filter
-    reads parts of both triangles, and an asymmetric matrix can give negative variances."""
-    for k, covariance in enumerate(covariances):
-        name = f"'joint.covariances[{k}]' (state {k})"
-        diagonal = np.diag(covariance)
-        if np.any(diagonal <= 0):
-            j = int(np.flatnonzero(diagonal <= 0)[0])
-            raise ValueError(
-                f"{name} has the non-positive variance {float(diagonal[j])!r} in column {j}"
-            )
-        tolerance = 1e-10 * np.sqrt(np.outer(diagonal, diagonal))
-        asymmetric = np.abs(covariance - covariance.T) > tolerance
-        if asymmetric.any():
-            i, j = (int(v[0]) for v in np.nonzero(asymmetric))
-            raise ValueError(
-                f"{name} is not symmetric: entry [{i}, {j}] is {float(covariance[i, j])!r} "
-                f"but entry [{j}, {i}] is {float(covariance[j, i])!r}"
-            )
-        try:
-            np.linalg.cholesky(covariance)
-        except np.linalg.LinAlgError:
-            raise ValueError(f"{name} is not positive definite") from None
-
-
-def _check_conditional_covariances(model):
-    """The covariance of the outputs given the inputs (the predictive variance within a state)
-    must be positive definite too; it is not when the joint one is singular to round-off."""
-    for k, covariance in enumerate(model.gmr.conditional_covariances):
-        try:
-            np.linalg.cholesky(covariance)
-        except np.linalg.LinAlgError:
-            raise ValueError(
-                f"'filter.conditional_covariances[{k}]' (state {k}), the covariance of the "
-                "outputs given the inputs, is not positive definite: 'joint.covariances"
-                f"[{k}]' is singular to round-off"
-            ) from None
-
-
-def _require(data, key, where=""):
-    if key not in data:
-        raise ValueError(f"the model file lacks the key {where + key!r}")
-    return data[key]
-
-
-def _count(data, key):
-    value = _require(data, key)
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"{key!r} must be a positive integer, got {value!r}")
-    return value
-
-
-def _names(data, key, length):
-    names = _require(data, key)
-    if not isinstance(names, list) or len(names) != length:
-        raise ValueError(f"{key!r} must be a list of {length} names")
-    if not all(isinstance(name, str) for name in names):
-        raise ValueError(f"{key!r} must hold strings only")
-    repeated = sorted({name for name in names if names.count(name) > 1})
-    if repeated:
-        raise ValueError(f"{key!r} names {repeated} more than once")
-    return names
-
-
-def _arrays(data, section, shapes, dims):
-    block = _require(data, section)
-    if not isinstance(block, dict):
-        raise ValueError(f"{section!r} must be a JSON object")
-    arrays = {}
-    for key, symbolic in shapes.items():
-        name = f"{section}.{key}"
-        value = _require(block, key, where=f"{section}.")
-        expected = tuple(dims[symbol] for symbol in symbolic)
-        try:
-            array = np.asarray(value, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{name!r} is not a (nested) list of numbers") from exc
-        if array.shape != expected:
-            raise ValueError(f"{name!r} has shape {array.shape}, expected {expected}")
-        if not np.isfinite(array).all():
-            raise ValueError(f"{name!r} holds non-finite values")
-        arrays[key] = array
-    return arrays
-
-
-def _check_probabilities(array, name):
-    if np.any(array < 0) or not np.allclose(array.sum(axis=-1), 1.0, rtol=0, atol=1e-8):
-        raise ValueError(f"{name!r} must hold non-negative probabilities summing to 1")
-
-
-def _check_filter_matches_joint(filtering, model):
-    """The filter block is derived from the joint block: refuse files where they disagree."""
-    gmr = model.gmr
-    for key, value in [
-        ("input_means", gmr.gating.means),
-        ("input_precision_cholesky", gmr.gating.whitening()),
-        ("regression_coefficients", gmr.coef),
-        ("regression_intercepts", gmr.intercept),
-        ("conditional_covariances", gmr.conditional_covariances),
-    ]:
-        if not np.allclose(filtering[key], value, rtol=1e-8, atol=1e-10):
-            raise ValueError(
-                f"'filter.{key}' does not match the one derived from 'joint' and "
-                "'standardization'; the file was edited or corrupted"
-            )
+publish(globals())

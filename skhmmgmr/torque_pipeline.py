@@ -32,7 +32,12 @@ from sklearn.pipeline import Pipeline
 from sklearn.utils.metaestimators import available_if
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ._core._compat import Interval, _fit_context, _routing_enabled
+from ._core._compat import (
+    Interval,
+    _fit_context,
+    _routing_enabled,
+    validate_parameter_constraints,
+)
 from ._core._docstrings import fill_shared_parameters
 from ._core._panel import align_target, has_recording_index, read_layout
 from .estimator import HMMGMRRegressor
@@ -189,13 +194,23 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
         self : SteeringFeatures
             The fitted transformer.
         """
+        self._check_parameters()
+        validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
+        self._check_inputs()
+        return self
+
+    def _check_parameters(self):
+        """What the parameters' constraints cannot say: the powers, the load columns, and
+        ``sampling_period`` with ``velocity_filter``."""
         self._check_powers()
         if self.velocity_filter is not None and self.sampling_period is None:
             raise ValueError(
                 f"velocity_filter={self.velocity_filter!r} needs sampling_period (the seconds "
                 "between two rows); got sampling_period=None."
             )
-        validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
+
+    def _check_inputs(self):
+        """The fitted inputs hold the source columns and none of the derived ones."""
         self._sources()
         inputs = [str(name) for name in getattr(self, "feature_names_in_", ())]
         taken = [name for name in self._derived_names() if name in inputs]
@@ -205,7 +220,6 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
                 "them, or leave their source out (friction_velocity=None for the friction "
                 "input, load_columns or powers for the others)."
             )
-        return self
 
     def fit_transform(self, X, y=None, groups=None):
         """Fit, then append the derived inputs (see :meth:`transform`).
@@ -426,6 +440,23 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
         tags.input_tags.allow_nan = True
         tags.requires_fit = True
         return tags
+
+
+def restore_steering_features(params, n_features_in, feature_names_in=None):
+    """A fitted :class:`SteeringFeatures` from its parameters and fitted facts (a step of the
+    portable model file), refused as ``fit`` would refuse them."""
+    step = SteeringFeatures(**params)
+    validate_parameter_constraints(
+        SteeringFeatures._parameter_constraints,
+        step.get_params(deep=False),
+        caller_name="SteeringFeatures",
+    )
+    step._check_parameters()
+    step.n_features_in_ = n_features_in
+    if feature_names_in is not None:
+        step.feature_names_in_ = np.asarray(feature_names_in, dtype=object)
+    step._check_inputs()
+    return step
 
 
 def _takes_groups(step, method):

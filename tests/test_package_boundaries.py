@@ -265,10 +265,10 @@ def test_only_the_emission_model_knows_the_covariance_form():
 
 # The estimator's exporters and the module that owns each format.
 EXPORTER_OWNERS = {
-    "to_dict": "portable",
-    "export_json": "portable",
-    "from_dict": "portable",
-    "from_json": "portable",
+    "to_dict": "_hmm._portable",
+    "export_json": "_hmm._portable",
+    "from_dict": "_hmm._portable",
+    "from_json": "_hmm._portable",
     "to_hmmlearn": "_hmm._hmmlearn",
     "from_hmmlearn": "_hmm._hmmlearn",
     "filter_stream": "streaming",

@@ -20,14 +20,15 @@ LAYERS = (
     ("_core", "_version", "_legacy"),
     # the HMM-GMR engine, the metrics, the datasets and the figures: each on the ground alone
     ("_hmm", "metrics", "datasets", "plotting"),
-    # what reads a fitted model: its JSON form, the stream; the EM on a dask cluster
-    ("portable", "streaming", "cluster"),
+    # what reads a fitted model: the stream; the EM on a dask cluster
+    ("streaming", "cluster"),
     # the scikit-learn estimator
     ("estimator",),
     # what uses the estimator: the torque pipeline, the search over recordings
     ("torque_pipeline", "_search"),
-    # the selectors; the C code of a fitted regressor or torque pipeline
-    ("feature_selection", "state_selection", "export"),
+    # the selectors; the model file of any fitted model (the regressor, the torque pipeline);
+    # the C code of a fitted regressor or torque pipeline
+    ("feature_selection", "state_selection", "portable", "export"),
     # the framework over all selectors, the users' checks
     ("selection", "utils"),
     # the command line and its report

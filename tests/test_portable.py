@@ -82,7 +82,9 @@ def test_file_is_strict_json_with_documented_keys(model, exported):
         raise AssertionError(f"non-finite token {token}")
 
     data = json.loads(exported.read_text(), parse_constant=reject)
-    assert data["format"] == "skhmmgmr-hmm-gmr" and data["format_version"] == 1
+    assert data["format"] == "skhmmgmr-hmm-gmr" and data["format_version"] == 2
+    assert data["model_type"] == "HMMGMRRegressor"
+    assert data["training"] == {"longest_recording": 150}
     assert data["package_version"] == skhmmgmr.__version__
     assert data["feature_names"] == ["speed", "steering_wheel_angle", "yaw_rate"]
     assert data["output_names"] == ["steering_torque"]
@@ -130,12 +132,13 @@ def test_unfitted_model_cannot_export():
 
 
 def edited(data, key, value):
-    """Copy of ``data`` with the dotted ``key`` set to ``value`` (deleted when ``...``)."""
+    """Copy of ``data`` with the dotted ``key`` set to ``value`` (deleted when ``...``);
+    ``name[i]`` in ``key`` is item ``i`` of the list ``name``."""
     data = copy.deepcopy(data)
-    *parents, last = key.split(".")
+    *parents, last = key.replace("[", ".").replace("]", "").split(".")
     target = data
     for parent in parents:
-        target = target[parent]
+        target = target[int(parent)] if isinstance(target, list) else target[parent]
     if value is ...:
         del target[last]
     else:
@@ -170,7 +173,10 @@ def test_missing_key_is_named(model, key):
         ("filter.regression_intercepts", [["a"]] * 5, "'filter.regression_intercepts' is not"),
         ("filter.start_probabilities", [0.5, 0.6, 0, 0, -0.1], "start_probabilities' must"),
         ("standardization.input_scale", [1.0, 0.0, 1.0], "input_scale' must be positive"),
-        ("format_version", 2, "'format_version' is 2"),
+        ("format_version", 3, "'format_version' is 3: the file was written by a newer"),
+        ("format_version", 0, "'format_version' is 0; format versions are whole numbers"),
+        ("model_type", "TorquePipeline", "'model_type' is 'TorquePipeline', not 'HMMGMRR"),
+        ("training", {"longest_recording": 0}, "'training.longest_recording' must be a pos"),
         ("format", "onnx", "'format' is 'onnx'"),
         ("n_inputs", 0, "'n_inputs' must be a positive integer"),
         ("feature_names", ["a", "b"], "'feature_names' must be a list of 3"),

@@ -305,40 +305,174 @@ def _ordered_data(args):
     return in_time_order(frame, args.data, recording=args.recording, time=time)
 
 
-def command_fit(args):
+# --pipeline: the models fit can write
+PIPELINES = ("hmmgmr", "torque")
+# Options of --pipeline torque, the parameters of make_torque_pipeline they set.
+TORQUE_OPTIONS = {
+    "friction_velocity": "steering-wheel velocity [rad/s] over which friction changes sign "
+    "('none': no friction input)",
+    "friction_column": "column of the steering-wheel velocity",
+    "load_columns": "columns whose signed powers are appended (the option alone: none)",
+    "powers": "powers >= 2 appended for every load column",
+    "velocity_filter": "time constant [s] of a causal low-pass filter on the velocity before "
+    "the friction input, restarted at every recording",
+}
+
+
+def _torque_defaults():
+    """Defaults of :func:`~skhmmgmr.make_torque_pipeline` (and of ``SteeringFeatures``):
+    ``fit --pipeline torque`` uses and shows them."""
+    from ..torque_pipeline import SteeringFeatures, make_torque_pipeline
+
+    defaults = {}
+    for function in (SteeringFeatures, make_torque_pipeline):
+        for name, parameter in inspect.signature(function).parameters.items():
+            if name in TORQUE_OPTIONS:
+                defaults[name] = parameter.default
+    return defaults
+
+
+def _option(name):
+    return f"--{name.replace('_', '-')}"
+
+
+def _sampling_period(frame, args):
+    """Seconds between two rows: ``--sampling-period``, else the median time step of the
+    recordings (``None`` without a time column)."""
+    if args.sampling_period is not None:
+        if not args.sampling_period > 0:
+            raise CommandError(f"--sampling-period must be positive, got {args.sampling_period}")
+        return args.sampling_period
+    if args.time == NO_TIME:
+        return None
+    step = frame.groupby(args.recording, sort=False)[args.time].diff().median()
+    return None if pd.isna(step) else float(step)
+
+
+def _model_to_fit(args, period):
+    """The unfitted model of ``--pipeline`` with the options that reach it."""
     from ..estimator import HMMGMRRegressor
+    from ..torque_pipeline import make_torque_pipeline
+
+    common = dict(random_state=args.seed, n_init=args.n_init)
+    # absent options are absent from args (SUPPRESS): "none" may be given explicitly
+    given = {n: getattr(args, n) for n in TORQUE_OPTIONS if hasattr(args, n)}
+    if args.pipeline != "torque":
+        if given:
+            options = ", ".join(map(_option, given))
+            raise CommandError(f"{options}: for --pipeline torque only")
+        return HMMGMRRegressor(n_states=args.n_states, **common)
+    options = _torque_defaults()
+    options.update(given)
+    for name in ("load_columns", "powers"):
+        options[name] = tuple(options[name])
+    if options["velocity_filter"] is not None and period is None:
+        raise CommandError(
+            f"--velocity-filter needs the sampling period: give --sampling-period, or a time "
+            f"column (--time, now {args.time!r})"
+        )
+    friction_column = options.pop("friction_column")
+    pipe = make_torque_pipeline(args.n_states, sampling_period=period, **options, **common)
+    pipe.set_params(steering_features__friction_column=friction_column)
+    return pipe
+
+
+def _inputs(frame, features, args):
+    """The feature columns, indexed by the time column when there is one: a velocity filter
+    checks its sampling period against it in every recording."""
+    X = frame[features]
+    if args.time == NO_TIME:
+        return X
+    return X.set_axis(pd.Index(frame[args.time].to_numpy(dtype=float), name=TIME))
+
+
+def command_fit(args):
+    from ..portable import save
 
     check_output(args.output, overwrite=args.overwrite, inputs=[args.data])
     frame = _ordered_data(args)
     check_columns(frame, [args.target], args.data)
     features = _feature_columns(frame, args)
     check_columns(frame, features, args.data)
-    model = HMMGMRRegressor(n_states=args.n_states, random_state=args.seed, n_init=args.n_init)
+    period = _sampling_period(frame, args)
+    model = _model_to_fit(args, period)
     try:
-        model.fit(frame[features], frame[args.target], groups=frame[args.recording].to_numpy())
+        model.fit(
+            _inputs(frame, features, args),
+            frame[args.target],
+            groups=frame[args.recording].to_numpy(),
+        )
     except ValueError as exc:
         raise CommandError(f"{args.data}: {exc}") from exc
-    write_output(args.output, model.export_json)
+    write_output(
+        args.output,
+        lambda path: save(model, path, output_names=[args.target], sampling_period=period),
+    )
+    derived = ""
+    if args.pipeline == "torque":
+        names = list(model[0].get_feature_names_out())[len(features) :]
+        derived = f"; derived by the torque pipeline: {', '.join(names) or 'none'}"
     _log(
         args,
-        f"Fitted K={args.n_states} on {len(features)} input(s): {', '.join(features)}; "
-        f"wrote {args.output}",
+        f"Fitted K={args.n_states} on {len(features)} input(s): {', '.join(features)}"
+        f"{derived}; wrote {args.output}",
     )
     return 0
 
 
+def _recording_metrics(frame, estimate, groups, args, training):
+    """Per-recording RMSE, accuracy and smoothness of the estimate (``None`` without the
+    target column); the smoothness needs the time column or the model's sampling period."""
+    from ..metrics._table import recording_metrics
+
+    if args.target not in frame.columns or estimate.ndim != 1:
+        return None
+    time = None if args.time == NO_TIME else frame[args.time].to_numpy(dtype=float)
+    period = training.get("sampling_period") if time is None else None
+    timed = time is not None or period is not None
+    metrics = recording_metrics(
+        frame[args.target].to_numpy(dtype=float),
+        estimate,
+        groups=groups,
+        time=time,
+        sampling_period=period,
+        smoothness=timed,
+    )
+    return metrics.to_frame(keep_output=False)
+
+
+def _print_metrics(table, args):
+    columns = [c for c in ("rmse", "accuracy", "smoothness") if c in table]
+    print(f"{args.target}: {', '.join(columns)} per recording (accuracy in %)")
+    print(table.round(3).to_string(index=False))
+    means = ", ".join(f"{c} {table[c].mean():.3f}" for c in columns)
+    print(f"mean over {len(table)} recording(s): {means}")
+    if "smoothness" not in table:
+        print(
+            "smoothness: not reported, the time step is unknown (no --time column and no "
+            "sampling period in the model file)"
+        )
+
+
 def command_predict(args):
+    from sklearn.pipeline import Pipeline
+
     data_path = Path(args.data)
     output = Path(
         args.output or data_path.with_name(f"{data_path.stem}_predicted{data_path.suffix}")
     )
     check_output(output, overwrite=args.overwrite, inputs=[args.data, args.model])
-    model = load_model(args.model)
+    if args.metrics is not None:
+        check_output(args.metrics, overwrite=args.overwrite, inputs=[args.data, args.model])
+        if Path(args.metrics).resolve() == output.resolve():
+            raise CommandError(f"--metrics {args.metrics} is also the predictions' --output")
+    model, training = load_model(args.model, return_training=True)
     frame = _ordered_data(args)
     features = list(model.feature_names_in_)
     check_columns(frame, features, args.data)
+    regressor = model[-1] if isinstance(model, Pipeline) else model
     names = [f"{args.prefix}{n}" for n in ("estimate", "estimate_std")]
-    names += [f"{args.prefix}state_{k}" for k in range(model.n_states)]
+    names += [f"{args.prefix}state_{k}" for k in range(regressor.n_states)]
     taken = [name for name in names if name in frame.columns]
     if taken:
         raise CommandError(
@@ -346,11 +480,27 @@ def command_predict(args):
             "them, or pass --prefix to write the predictions under other names"
         )
     groups = frame[args.recording].to_numpy()
+    inputs = _inputs(frame, features, args)
     try:
-        estimate, std = model.predict(frame[features], groups=groups, return_std=True)
-        proba = model.predict_state_proba(frame[features], groups=groups)
+        # the recordings reach every step of a pipeline (the velocity filter restarts)
+        for _, step in model.steps[:-1] if regressor is not model else []:
+            inputs = step.transform(inputs, groups=groups)
+        estimate, std = regressor.predict(inputs, groups=groups, return_std=True)
+        proba = regressor.predict_state_proba(inputs, groups=groups)
     except ValueError as exc:
         raise CommandError(f"{args.data}: {exc}") from exc
+    try:
+        table = _recording_metrics(frame, estimate, groups, args, training)
+    except ValueError as exc:
+        if args.metrics is not None:
+            raise CommandError(f"{args.data}: no accuracy: {exc}") from exc
+        print(f"skhmmgmr predict: no accuracy reported: {exc}", file=sys.stderr)
+        table = None
+    if args.metrics is not None and table is None:
+        raise CommandError(
+            f"--metrics: {args.data} has no target column {args.target!r} to compare with "
+            "(name it with --target)"
+        )
     written = {
         f"{args.prefix}estimate": estimate,
         f"{args.prefix}estimate_std": std,
@@ -362,6 +512,11 @@ def command_predict(args):
     else:
         write_output(output, lambda partial: result.to_csv(partial, index=False))
     _log(args, f"Wrote {output} ({len(result)} rows)")
+    if table is not None:
+        _print_metrics(table, args)
+    if args.metrics is not None:
+        write_output(args.metrics, lambda partial: table.to_csv(partial, index=False))
+        _log(args, f"Wrote {args.metrics} ({len(table)} recordings)")
     return 0
 
 
@@ -401,6 +556,31 @@ def _add_output_options(parser, default, text):
     parser.add_argument("--output", default=default, help=text)
     text = "replace an existing output that is not a skhmmgmr report (never an input)"
     parser.add_argument("--overwrite", action="store_true", help=text)
+
+
+def _none_or_float(text):
+    return None if text.lower() == "none" else float(text)
+
+
+def _add_torque_options(parser):
+    """Options of ``fit --pipeline torque``, the parameters of ``make_torque_pipeline``."""
+    defaults = _torque_defaults()
+
+    def shown(name):
+        value = defaults[name]
+        value = " ".join(map(str, value)) if isinstance(value, tuple) else value
+        value = "none" if value is None else value
+        return f"{TORQUE_OPTIONS[name]}; --pipeline torque only (default: {value})"
+
+    kinds = {
+        "friction_velocity": dict(type=_none_or_float),
+        "friction_column": {},
+        "load_columns": dict(nargs="*"),
+        "powers": dict(nargs="*", type=int),
+        "velocity_filter": dict(type=float),
+    }
+    for name, kind in kinds.items():
+        parser.add_argument(_option(name), default=argparse.SUPPRESS, help=shown(name), **kind)
 
 
 def _add_framework_options(parser, defaults=None):
@@ -497,23 +677,49 @@ def build_parser():
     report.add_argument("result_dir", help="folder written by 'skhmmgmr demo' or 'select'")
     report.set_defaults(handler=command_report)
 
-    fit = sub.add_parser("fit", help="fit a model on CSV/Parquet recordings", **common)
+    fit = sub.add_parser(
+        "fit",
+        help="fit a model on CSV/Parquet recordings",
+        description="Fit HMMGMRRegressor, or with --pipeline torque the recommended torque "
+        "pipeline (make_torque_pipeline: friction and steering-load inputs derived in front of "
+        "it), and save it as one portable JSON model file.",
+        **common,
+    )
     fit.add_argument("data", help="CSV or Parquet file, one row per sample")
     _add_data_options(fit, file_order=True)
     fit.add_argument("--features", nargs="+", help="feature columns (default: all numeric)")
     fit.add_argument("--n-states", type=int, default=5, help="number of hidden states K")
     fit.add_argument("--n-init", type=int, default=1, help="EM restarts, the best one is kept")
     fit.add_argument("--seed", type=int, default=0, help="random seed")
+    text = (
+        "model to fit: 'hmmgmr', HMMGMRRegressor on the features; 'torque', the torque "
+        "pipeline (the package's most accurate model; its columns must be among the features)"
+    )
+    fit.add_argument("--pipeline", choices=PIPELINES, default="hmmgmr", help=text)
+    _add_torque_options(fit)
+    text = (
+        "seconds between two rows, for --velocity-filter and the smoothness predict reports "
+        "(default: the median time step of the recordings, none with --time none)"
+    )
+    fit.add_argument("--sampling-period", type=float, help=text)
     _add_output_options(fit, "model.json", "model file to write (portable JSON)")
     fit.set_defaults(handler=command_fit)
 
     predict = sub.add_parser(
-        "predict", help="write estimate, std and state probabilities", **common
+        "predict",
+        help="write estimate, std and state probabilities; report accuracy with the target",
+        description="Predict with a model file of 'skhmmgmr fit' (a regressor or a torque "
+        "pipeline). When the data hold the target column, print the RMSE, the accuracy and "
+        "the smoothness (the standard deviation of the estimate's time derivative, lower is "
+        "smoother) of every recording (skhmmgmr.metrics), and with --metrics write them.",
+        **common,
     )
     predict.add_argument("model", help="model file (portable JSON) written by 'skhmmgmr fit'")
     predict.add_argument("data", help="CSV or Parquet file")
     _add_data_options(predict, file_order=True)
     _add_output_options(predict, None, "output file (default: DATA_predicted.EXT)")
+    text = "CSV file for the metrics of every recording (needs the target column)"
+    predict.add_argument("--metrics", help=text + " (default: printed only)")
     predict.add_argument(
         "--prefix",
         default="",

@@ -3,7 +3,8 @@
 Inputs: a CSV or Parquet table, read by the loaders' reader (recording ids as text, every error
 naming the file); its rows put in the order of :func:`~skhmmgmr.datasets.load_recordings`
 (recordings contiguous in order of first appearance, rows sorted by time, a repeated time
-refused); and the model file, read only as the portable JSON format, never unpickled.
+refused); and the model file (a regressor or a torque pipeline), read only as the portable JSON
+format, never unpickled.
 
 Outputs: checked before the run, so that a long run never ends in an error it could have
 reported at once (the folder exists and is writable, an input is never overwritten, a user's
@@ -88,15 +89,17 @@ def in_time_order(frame, path, *, recording, time):
     return frame
 
 
-def load_model(path):
-    """The estimator saved by ``skhmmgmr fit``: the portable JSON format only."""
-    from ..estimator import HMMGMRRegressor
+def load_model(path, *, return_training=False):
+    """The model saved by ``skhmmgmr fit`` (:func:`skhmmgmr.portable.load`: a regressor or a
+    torque pipeline), the portable JSON format only; with ``return_training``, also the
+    file's facts about the training data (its sampling period)."""
+    from ..portable import load
 
     path = Path(path)
     if not path.is_file():
         raise CommandError(f"model file not found: {path}")
     try:
-        model = HMMGMRRegressor.from_json(path)
+        model, training = load(path, return_training=True)
     except Exception as exc:  # any failure is the file's: it is read as data, never run
         raise CommandError(
             f"cannot load the model file {path}: {exc}. Model files are the portable JSON "
@@ -108,7 +111,7 @@ def load_model(path):
             f"{path}: the model was fitted without feature names; fit it with 'skhmmgmr fit' "
             "or on a DataFrame"
         )
-    return model
+    return (model, training) if return_training else model
 
 
 def _holds(output, source):

@@ -2,15 +2,21 @@
 
 The estimator's own constructor from a :class:`~skhmmgmr.FittedHMMGMR` lives here; every
 exporter lives with its owner and the estimator's method is one line that delegates: the
-portable JSON format to :mod:`skhmmgmr.portable`, hmmlearn to :mod:`skhmmgmr._hmm._hmmlearn`,
-the stream to :class:`~skhmmgmr.FilterStream`.
+portable JSON format to :mod:`skhmmgmr._hmm._portable` (the regressor's block of the format of
+:mod:`skhmmgmr.portable`), hmmlearn to :mod:`skhmmgmr._hmm._hmmlearn`, the stream to
+:class:`~skhmmgmr.FilterStream`.
 """
 
 import numpy as np
 
 from .._core._compat import validate_parameter_constraints
 from .._hmm._hmmlearn import estimator_from_hmmlearn, estimator_to_hmmlearn
-from ..portable import estimator_from_dict, estimator_from_json, estimator_to_dict, export_json
+from .._hmm._portable import (
+    estimator_from_dict,
+    estimator_from_json,
+    estimator_to_dict,
+    export_json,
+)
 from ..streaming import FilterStream
 
 

@@ -1,0 +1,502 @@
+"""The regressor's block of the portable model file: a fitted HMM-GMR model as plain JSON.
+
+The format, every key and its units, is specified in the docstring of :mod:`skhmmgmr.portable`,
+which reads and writes whole files (the regressor, or a pipeline whose last step holds such a
+block). This module writes and reads the regressor's dict: :func:`to_dict` of a
+:class:`~skhmmgmr.FittedHMMGMR`, :func:`read_model` back, and the estimator's own ``to_dict``,
+``export_json``, ``from_dict`` and ``from_json`` (:func:`estimator_to_dict`,
+:func:`export_json`, :func:`estimator_from_dict`, :func:`estimator_from_json`): the
+estimator's parameters, fit information and training facts travel with the model.
+"""
+
+import json
+import math
+from dataclasses import dataclass, field
+from numbers import Integral
+
+import numpy as np
+from sklearn.utils.validation import check_is_fitted
+
+from .._core._compat import InvalidParameterError
+from .._version import __version__
+from ._emissions import emission_family
+from ._fitted import FittedHMMGMR, Standardization
+from ._gaussian import NotPositiveDefiniteError
+from ._stale_inputs import MAX_LAG, StaleInputNoise
+
+FORMAT_NAME = "skhmmgmr-hmm-gmr"
+# 1: 0.1.0, the regressor only; 2: ``model_type`` (the regressor or a pipeline) and ``training``
+FORMAT_VERSION = 2
+REGRESSOR_TYPE = "HMMGMRRegressor"
+
+_FILTER_SHAPES = {
+    "start_probabilities": ("K",),
+    "transition_matrix": ("K", "K"),
+    "input_means": ("K", "F"),
+    "input_precision_cholesky": ("K", "F", "F"),
+    "regression_coefficients": ("K", "O", "F"),
+    "regression_intercepts": ("K", "O"),
+    "conditional_covariances": ("K", "O", "O"),
+}
+_STANDARDIZATION_SHAPES = {
+    "input_center": ("F",),
+    "input_scale": ("F",),
+    "output_center": ("O",),
+    "output_scale": ("O",),
+}
+_JOINT_SHAPES = {"means": ("K", "D"), "covariances": ("K", "D", "D")}
+
+
+def to_dict(model, *, estimator_params=None, fit_info=None, output_names=None, training=None):
+    """JSON-ready dict of a :class:`~skhmmgmr.FittedHMMGMR` (a regressor file of the format
+    of :mod:`skhmmgmr.portable`).
+
+    ``estimator_params`` (the estimator's ``get_params()``), ``fit_info`` (log-likelihood,
+    histories, iterations) and ``training`` (facts about the training data, see
+    :func:`read_training`) are stored as given.
+    """
+
+    gmr, scaling = model.gmr, model.standardization
+    n_inputs, n_outputs = model.n_inputs, model.n_outputs
+    if output_names is None:
+        output_names = [f"output_{i}" for i in range(n_outputs)]
+    output_names = [str(name) for name in output_names]
+    if len(output_names) != n_outputs:
+        raise ValueError(f"output_names has {len(output_names)} names for {n_outputs} output(s)")
+    named = model.feature_names is not None
+    feature_names = model.feature_names if named else [f"x{i}" for i in range(n_inputs)]
+    estimator_params = dict(estimator_params or {})
+    if not isinstance(estimator_params.get("random_state"), Integral | None):
+        estimator_params["random_state"] = None
+    data = {
+        "format": FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "package_version": __version__,
+        "model_type": REGRESSOR_TYPE,
+        "n_states": int(model.n_states),
+        "n_inputs": int(n_inputs),
+        "n_outputs": int(n_outputs),
+        "feature_names": [str(name) for name in feature_names],
+        "feature_names_from_fit": named,
+        "output_names": output_names,
+        "target_ndim": 1 if model.scalar_output else 2,
+        "standardization": {
+            "input_center": scaling.input_center,
+            "input_scale": scaling.input_scale,
+            "output_center": scaling.output_center,
+            "output_scale": scaling.output_scale,
+        },
+        "filter": {
+            "start_probabilities": model.startprob,
+            "transition_matrix": model.transmat,
+            "input_means": gmr.gating.means,
+            "input_precision_cholesky": gmr.gating.whitening(),
+            "regression_coefficients": gmr.coef,
+            "regression_intercepts": gmr.intercept,
+            "conditional_covariances": gmr.conditional_covariances,
+        },
+        "joint": model.data_emissions.portable_joint(),
+        "estimator_params": estimator_params,
+        "fit_info": dict(fit_info or {}),
+        "training": dict(training or {}),
+    }
+    if model.stale_noise is not None:
+        variances = model.stale_noise.variances
+        data["stale_inputs"] = {
+            "lags": model.stale_noise.lags,
+            "variances": np.where(np.isfinite(variances), variances, None),
+        }
+    return _to_plain(data, "")
+
+
+def _to_plain(value, key):
+    """NumPy arrays and scalars to lists and Python numbers; refuse non-finite numbers."""
+    if isinstance(value, dict):
+        return {name: _to_plain(item, f"{key}.{name}".lstrip(".")) for name, item in value.items()}
+    if isinstance(value, np.ndarray | list | tuple):
+        array = np.asarray(value)
+        if array.dtype.kind == "f" and not np.isfinite(array).all():
+            raise ValueError(f"cannot export {key!r}: it holds NaN or infinite values")
+        return array.tolist()
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ValueError(f"cannot export {key!r}: it is {value}")
+    return value
+
+
+def export_json(data, path):
+    """Write a :func:`to_dict` dict to ``path`` as strict JSON (no NaN tokens)."""
+    text = json.dumps(data, indent=1, allow_nan=False)
+    with open(path, "w", encoding="utf-8") as file:
+        file.write(text + "\n")
+
+
+def load_json(path):
+    """Read a portable model file into a dict, rejecting invalid JSON and NaN tokens."""
+
+    def reject(token):
+        raise ValueError(f"{path}: the number {token} is not valid JSON (non-finite value)")
+
+    try:
+        with open(path, encoding="utf-8") as file:
+            text = file.read()
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path} is not a JSON text file (UTF-8): {exc}") from None
+    try:
+        return json.loads(text, parse_constant=reject)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path} is not a valid JSON file: {exc}") from exc
+    except RecursionError:
+        raise ValueError(f"{path}: the JSON is nested too deeply for a model file") from None
+    except ValueError as exc:  # such as an integer of thousands of digits
+        raise ValueError(f"{path} is not a valid model file: {exc}") from None
+
+
+# Fit information the JSON format keeps, as the estimator's attributes (name + "_").
+FIT_INFO_KEYS = (
+    "log_likelihood",
+    "log_likelihood_history",
+    "penalized_log_likelihood",
+    "penalized_log_likelihood_history",
+    "n_iter",
+    "converged",
+)
+
+
+_HISTORIES = ("log_likelihood_history", "penalized_log_likelihood_history")
+
+
+def estimator_to_dict(estimator, *, output_names=None, training=None):
+    """:func:`to_dict` of a fitted estimator's ``model_``, with its ``get_params()``, fit
+    information (:data:`FIT_INFO_KEYS`, the attributes ``name + "_"``) and its longest training
+    recording (``longest_recording_``) added to ``training``."""
+    check_is_fitted(estimator)
+    longest = getattr(estimator, "longest_recording_", None)
+    return to_dict(
+        estimator.model_,
+        estimator_params=estimator.get_params(),
+        fit_info={key: getattr(estimator, key + "_", None) for key in FIT_INFO_KEYS},
+        output_names=output_names,
+        training={"longest_recording": longest, **(training or {})},
+    )
+
+
+def estimator_from_dict(cls, data):
+    """A fitted estimator of class ``cls`` restored from :func:`to_dict` output: its
+    ``from_fitted_model`` with the stored parameters, then the stored fit information."""
+    portable = read_model(data)
+    try:
+        estimator = cls.from_fitted_model(portable.model, **portable.estimator_params)
+    except InvalidParameterError as exc:
+        raise ValueError(f"'estimator_params' holds a value fit refuses: {exc}") from exc
+    except TypeError as exc:
+        raise ValueError(f"'estimator_params' holds an unknown parameter: {exc}") from exc
+    for key, value in portable.fit_info.items():
+        setattr(estimator, key + "_", np.asarray(value, float) if key in _HISTORIES else value)
+    estimator.longest_recording_ = portable.training.get("longest_recording")
+    return estimator
+
+
+def estimator_from_json(cls, path):
+    """A fitted estimator of class ``cls`` restored from a model file (its ``from_dict``);
+    an error names the file."""
+    data = load_json(path)
+    try:
+        return cls.from_dict(data)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from exc
+
+
+@dataclass(frozen=True)
+class PortableModel:
+    """What a model file holds: the model, the estimator's parameters, its fit info and the
+    facts about its training data (``training``: empty for a file of format version 1)."""
+
+    model: FittedHMMGMR
+    estimator_params: dict
+    fit_info: dict
+    training: dict = field(default_factory=dict)
+
+
+def read_model(data):
+    """:class:`PortableModel` restored from :func:`to_dict` output (validated)."""
+    if not isinstance(data, dict):
+        raise ValueError(
+            f"a portable HMM-GMR model must be a JSON object, got {type(data).__name__}"
+        )
+    version = read_header(data)
+    if version >= 2 and _require(data, "model_type") != REGRESSOR_TYPE:
+        raise ValueError(
+            f"'model_type' is {data['model_type']!r}, not {REGRESSOR_TYPE!r}: a file of a "
+            "pipeline is read by skhmmgmr.portable.load"
+        )
+    dims = {"K": _count(data, "n_states"), "F": _count(data, "n_inputs")}
+    dims["O"] = _count(data, "n_outputs")
+    dims["D"] = dims["F"] + dims["O"]
+    feature_names = _names(data, "feature_names", dims["F"])
+    output_names = _names(data, "output_names", dims["O"])
+    named = _require(data, "feature_names_from_fit")
+    target_ndim = _require(data, "target_ndim")
+    if not isinstance(named, bool):
+        raise ValueError("'feature_names_from_fit' must be true or false")
+    if target_ndim not in (1, 2) or (target_ndim == 1 and dims["O"] != 1):
+        raise ValueError(f"'target_ndim' is {target_ndim!r}; it must be 1 (one output) or 2")
+    scaling = _arrays(data, "standardization", _STANDARDIZATION_SHAPES, dims)
+    filtering = _arrays(data, "filter", _FILTER_SHAPES, dims)
+    joint = _arrays(data, "joint", _JOINT_SHAPES, dims)
+    for key in ("input_scale", "output_scale"):
+        if np.any(scaling[key] <= 0):
+            raise ValueError(f"'standardization.{key}' must be positive")
+    _check_probabilities(filtering["start_probabilities"], "filter.start_probabilities")
+    _check_probabilities(filtering["transition_matrix"], "filter.transition_matrix")
+    standardization = Standardization(
+        np.concatenate([scaling["input_center"], scaling["output_center"]]),
+        np.concatenate([scaling["input_scale"], scaling["output_scale"]]),
+        dims["F"],
+    )
+    _check_joint_covariances(joint["covariances"])
+    emissions = _joint_emissions(data["joint"], joint)
+    try:
+        model = FittedHMMGMR(
+            filtering["start_probabilities"],
+            filtering["transition_matrix"],
+            emissions,
+            standardization,
+            scalar_output=target_ndim == 1,
+            feature_names=feature_names if named else None,
+            stale_noise=_stale_noise(data.get("stale_inputs"), dims["F"]),
+        )
+    except (NotPositiveDefiniteError, np.linalg.LinAlgError) as exc:
+        raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
+    _check_filter_matches_joint(filtering, model)
+    _check_conditional_covariances(model)
+
+    params = _require(data, "estimator_params")
+    if not isinstance(params, dict):
+        raise ValueError("'estimator_params' must be a JSON object")
+    fit_info = data.get("fit_info") or {}
+    if not isinstance(fit_info, dict):
+        raise ValueError("'fit_info' must be a JSON object")
+    fit_info = {key: fit_info[key] for key in FIT_INFO_KEYS if fit_info.get(key) is not None}
+    for key in ("log_likelihood_history", "penalized_log_likelihood_history"):
+        if key in fit_info:
+            history = fit_info[key]
+            if not isinstance(history, list) or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in history
+            ):
+                raise ValueError(f"'fit_info.{key}' must be a list of numbers")
+    training = read_training(data.get("training"), [*feature_names, *output_names])
+    return PortableModel(model, params, fit_info, training)
+
+
+def read_header(data):
+    """The format version of a model file's dict, after checking its ``format``: a whole
+    number from 1 to :data:`FORMAT_VERSION`, newer ones refused as written by a newer
+    skhmmgmr."""
+    if _require(data, "format") != FORMAT_NAME:
+        raise ValueError(f"'format' is {data['format']!r}, expected {FORMAT_NAME!r}")
+    version = _require(data, "format_version")
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise ValueError(
+            f"'format_version' is {version!r}; format versions are whole numbers from 1 "
+            f"(this version of skhmmgmr reads 1 to {FORMAT_VERSION})"
+        )
+    if version > FORMAT_VERSION:
+        raise ValueError(
+            f"'format_version' is {version}: the file was written by a newer skhmmgmr; this "
+            f"version reads format versions 1 to {FORMAT_VERSION} (upgrade skhmmgmr to read it)"
+        )
+    return version
+
+
+TRAINING_KEYS = ("longest_recording", "sampling_period", "units")
+
+
+def read_training(block, names, where="training"):
+    """The ``training`` block checked: ``longest_recording`` (a positive whole number or
+    null), ``sampling_period`` (a positive number of seconds or null) and ``units`` (input or
+    output name -> unit text; with ``names``, every key one of them)."""
+    if block is None:
+        return {}
+    if not isinstance(block, dict):
+        raise ValueError(f"'{where}' must be a JSON object")
+    unknown = sorted(set(block) - set(TRAINING_KEYS))
+    if unknown:
+        raise ValueError(f"'{where}' holds the unknown key(s) {unknown}; known: {TRAINING_KEYS}")
+    longest = block.get("longest_recording")
+    if longest is not None and (
+        isinstance(longest, bool) or not isinstance(longest, int) or longest < 1
+    ):
+        raise ValueError(
+            f"'{where}.longest_recording' must be a positive whole number or null, got "
+            f"{longest!r:.100}"
+        )
+    period = block.get("sampling_period")
+    if period is not None and (
+        isinstance(period, bool) or not isinstance(period, int | float) or not 0 < period < math.inf
+    ):
+        raise ValueError(
+            f"'{where}.sampling_period' must be a positive number of seconds or null, got "
+            f"{period!r:.100}"
+        )
+    units = block.get("units")
+    if units is not None:
+        if not isinstance(units, dict) or not all(isinstance(u, str) for u in units.values()):
+            raise ValueError(f"'{where}.units' must map names to unit texts")
+        strangers = sorted(set(units) - set(names)) if names is not None else []
+        if strangers:
+            raise ValueError(
+                f"'{where}.units' names {strangers}, neither inputs nor outputs of the model "
+                f"(those are {list(names)})"
+            )
+    return {key: block[key] for key in TRAINING_KEYS if block.get(key) is not None}
+
+
+def _stale_noise(block, n_inputs):
+    if block is None:
+        return None
+    problem = (
+        "'stale_inputs' must be an object holding 'lags' (a list of whole numbers) and "
+        "'variances' (a list of lists of numbers or null, one list per input)"
+    )
+    if not isinstance(block, dict) or not isinstance(block.get("lags"), list):
+        raise ValueError(problem)
+    lags = block["lags"]
+    if not all(isinstance(lag, int) and not isinstance(lag, bool) for lag in lags):
+        raise ValueError(f"'stale_inputs.lags' must hold whole numbers, got {lags!r:.200}")
+    if not all(1 <= lag <= MAX_LAG for lag in lags):
+        raise ValueError(f"'stale_inputs.lags' must lie in [1, {MAX_LAG}], got {lags!r:.200}")
+    try:
+        variances = np.array(block["variances"], dtype=float)  # null -> NaN
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{problem} ({exc})") from None
+    noise = StaleInputNoise(
+        np.array(lags, dtype=np.int64), np.where(np.isnan(variances), np.inf, variances)
+    )
+    try:
+        return noise.frozen(n_inputs)
+    except ValueError as exc:
+        raise ValueError(f"'stale_inputs' is not usable: {exc}") from None
+
+
+def _joint_emissions(block, joint):
+    """The emission model of the ``joint`` block: its family checks that the covariances
+    have its form."""
+    try:
+        family = emission_family(block.get("covariance_type", "full"))
+    except ValueError as exc:
+        raise ValueError(f"'joint.covariance_type': {exc}") from exc
+    try:
+        return family.from_state_covariances(joint["means"], joint["covariances"])
+    except NotPositiveDefiniteError as exc:
+        raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
+    except ValueError as exc:
+        raise ValueError(f"'joint.covariances' {exc}") from exc
+
+
+def _check_joint_covariances(covariances):
+    """Every state's joint covariance must be symmetric and positive definite: the filter
+    reads parts of both triangles, and an asymmetric matrix can give negative variances."""
+    for k, covariance in enumerate(covariances):
+        name = f"'joint.covariances[{k}]' (state {k})"
+        diagonal = np.diag(covariance)
+        if np.any(diagonal <= 0):
+            j = int(np.flatnonzero(diagonal <= 0)[0])
+            raise ValueError(
+                f"{name} has the non-positive variance {float(diagonal[j])!r} in column {j}"
+            )
+        tolerance = 1e-10 * np.sqrt(np.outer(diagonal, diagonal))
+        asymmetric = np.abs(covariance - covariance.T) > tolerance
+        if asymmetric.any():
+            i, j = (int(v[0]) for v in np.nonzero(asymmetric))
+            raise ValueError(
+                f"{name} is not symmetric: entry [{i}, {j}] is {float(covariance[i, j])!r} "
+                f"but entry [{j}, {i}] is {float(covariance[j, i])!r}"
+            )
+        try:
+            np.linalg.cholesky(covariance)
+        except np.linalg.LinAlgError:
+            raise ValueError(f"{name} is not positive definite") from None
+
+
+def _check_conditional_covariances(model):
+    """The covariance of the outputs given the inputs (the predictive variance within a state)
+    must be positive definite too; it is not when the joint one is singular to round-off."""
+    for k, covariance in enumerate(model.gmr.conditional_covariances):
+        try:
+            np.linalg.cholesky(covariance)
+        except np.linalg.LinAlgError:
+            raise ValueError(
+                f"'filter.conditional_covariances[{k}]' (state {k}), the covariance of the "
+                "outputs given the inputs, is not positive definite: 'joint.covariances"
+                f"[{k}]' is singular to round-off"
+            ) from None
+
+
+def _require(data, key, where=""):
+    if key not in data:
+        raise ValueError(f"the model file lacks the key {where + key!r}")
+    return data[key]
+
+
+def _count(data, key):
+    value = _require(data, key)
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"{key!r} must be a positive integer, got {value!r}")
+    return value
+
+
+def _names(data, key, length):
+    names = _require(data, key)
+    if not isinstance(names, list) or len(names) != length:
+        raise ValueError(f"{key!r} must be a list of {length} names")
+    if not all(isinstance(name, str) for name in names):
+        raise ValueError(f"{key!r} must hold strings only")
+    repeated = sorted({name for name in names if names.count(name) > 1})
+    if repeated:
+        raise ValueError(f"{key!r} names {repeated} more than once")
+    return names
+
+
+def _arrays(data, section, shapes, dims):
+    block = _require(data, section)
+    if not isinstance(block, dict):
+        raise ValueError(f"{section!r} must be a JSON object")
+    arrays = {}
+    for key, symbolic in shapes.items():
+        name = f"{section}.{key}"
+        value = _require(block, key, where=f"{section}.")
+        expected = tuple(dims[symbol] for symbol in symbolic)
+        try:
+            array = np.asarray(value, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{name!r} is not a (nested) list of numbers") from exc
+        if array.shape != expected:
+            raise ValueError(f"{name!r} has shape {array.shape}, expected {expected}")
+        if not np.isfinite(array).all():
+            raise ValueError(f"{name!r} holds non-finite values")
+        arrays[key] = array
+    return arrays
+
+
+def _check_probabilities(array, name):
+    if np.any(array < 0) or not np.allclose(array.sum(axis=-1), 1.0, rtol=0, atol=1e-8):
+        raise ValueError(f"{name!r} must hold non-negative probabilities summing to 1")
+
+
+def _check_filter_matches_joint(filtering, model):
+    """The filter block is derived from the joint block: refuse files where they disagree."""
+    gmr = model.gmr
+    for key, value in [
+        ("input_means", gmr.gating.means),
+        ("input_precision_cholesky", gmr.gating.whitening()),
+        ("regression_coefficients", gmr.coef),
+        ("regression_intercepts", gmr.intercept),
+        ("conditional_covariances", gmr.conditional_covariances),
+    ]:
+        if not np.allclose(filtering[key], value, rtol=1e-8, atol=1e-10):
+            raise ValueError(
+                f"'filter.{key}' does not match the one derived from 'joint' and "
+                "'standardization'; the file was edited or corrupted"
+            )
