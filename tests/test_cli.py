@@ -148,8 +148,11 @@ def test_export_c_writes_the_c_filter_of_a_fitted_model(tmp_path, capsys):
     assert "float alpha[2]" in (folder / "torque.h").read_text()
     assert main(["export-c", str(model), str(folder), "--name", "2fast"]) == 2
     assert "--name: name must be a C identifier" in capsys.readouterr().err
-    assert main(["export-c", str(model), str(tmp_path / "nowhere")]) == 2
-    assert "is not an existing folder" in capsys.readouterr().err
+    assert main(["--quiet", "export-c", str(model), str(tmp_path / "new" / "c")]) == 0
+    assert (tmp_path / "new" / "c" / "skhmmgmr_model.h").is_file()  # the folder is made
+    (tmp_path / "file").write_text("")
+    assert main(["export-c", str(model), str(tmp_path / "file")]) == 2
+    assert "file exists and is not a folder" in capsys.readouterr().err
     assert main(["export-c", str(tmp_path / "none.json"), str(folder)]) == 2
     assert "model file not found" in capsys.readouterr().err
 

@@ -527,8 +527,9 @@ def command_export_c(args):
 
     model = load_model(args.model)
     folder = Path(args.directory)
-    if not folder.is_dir():
-        raise CommandError(f"{folder} is not an existing folder")
+    if folder.exists() and not folder.is_dir():
+        raise CommandError(f"{folder} exists and is not a folder")
+    folder.mkdir(parents=True, exist_ok=True)
     try:
         name = check_name(args.name)
     except ValueError as exc:
@@ -737,7 +738,7 @@ def build_parser():
         **common,
     )
     export.add_argument("model", help="model file (portable JSON) written by 'skhmmgmr fit'")
-    export.add_argument("directory", help="existing folder the two files are written to")
+    export.add_argument("directory", help="folder the two files are written to (made if absent)")
     export.add_argument("--name", default="skhmmgmr_model", help="C prefix of files and names")
     export.add_argument(
         "--float32",
