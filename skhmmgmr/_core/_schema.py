@@ -36,4 +36,16 @@ FEATURE_UNITS = {
     "road_curvature_30m": "1/m",
 }
 FEATURE_NAMES = tuple(FEATURE_UNITS)
+# What the driver sees of the road ahead (the lane camera's features): a model of the driver's
+# perception, which drives the simulator in closed loop where models that also read the
+# steering system's and the vehicle's states learn the steering system's inverse and diverge.
+PREVIEW_FEATURES = (
+    "lateral_deviation_0m",
+    "heading_deviation_0m",
+    "road_curvature_0m",
+    "heading_deviation_10m",
+    "road_curvature_10m",
+    "heading_deviation_30m",
+    "road_curvature_30m",
+)
 TARGET_UNIT = "Nm"

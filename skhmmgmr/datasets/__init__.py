@@ -6,6 +6,7 @@ from .._core._schema import (
     DRIVER,
     FEATURE_NAMES,
     FEATURE_UNITS,
+    PREVIEW_FEATURES,
     RECORDING,
     SETTING,
     SPLIT,
@@ -17,6 +18,7 @@ from ._calibration import CALIBRATION_BANDS, THESIS_TABLE_C2, calibration_table
 from ._comma2k19 import load_comma2k19_segment
 from ._comma2k19_sample import load_comma2k19_sample
 from ._comma2k19_scan import scan_comma2k19
+from ._drive import drive
 from ._driver import DRIVER_STYLES, DriverParameters
 from ._fetch import COMMA2K19_URL, fetch_comma2k19
 from ._protocol import make_driving_protocol
@@ -31,6 +33,7 @@ __all__ = [
     "DriverParameters",
     "THESIS_TABLE_C2",
     "calibration_table",
+    "drive",
     "make_driving_protocol",
     "make_lane_keeping",
     "COMMA2K19_URL",
@@ -47,6 +50,7 @@ __all__ = [
     "DRIVER",
     "FEATURE_NAMES",
     "FEATURE_UNITS",
+    "PREVIEW_FEATURES",
     "RECORDING",
     "SETTING",
     "SPLIT",

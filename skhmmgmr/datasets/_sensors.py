@@ -119,11 +119,18 @@ def ecu_derivative(x, dt, time_constant):
     return lfilter([a], [1.0, a - 1.0], difference)
 
 
-def measure_signal(x, sensor, dt, scale, rng):
-    """Measure one signal: add white noise and drift, then quantise."""
-    n = x.size
-    white = rng.standard_normal(n) * (sensor.white * scale)
-    drift = coloured_noise(n, dt, sensor.drift_time, sensor.drift * scale, rng)
+def draw_errors(n, dt, scale, rng):
+    """The errors of every signal of :data:`SENSORS` over ``n`` samples, ``(white noise,
+    drift)`` arrays, drawn in a fixed order (that of :func:`measure`)."""
+    errors = {}
+    for name, sensor in SENSORS.items():
+        white = rng.standard_normal(n) * (sensor.white * scale)
+        errors[name] = white, coloured_noise(n, dt, sensor.drift_time, sensor.drift * scale, rng)
+    return errors
+
+
+def with_errors(x, white, drift, sensor, scale):
+    """A signal (array or number) as its sensor reads it: plus its errors, quantised."""
     measured = x + white + drift
     step = sensor.resolution * scale
     if step > 0:
@@ -158,12 +165,68 @@ def measure(columns, torque, dt, speed, scale, rng):
     """
     if scale is None:
         return dict(columns), torque
+    errors = draw_errors(len(torque), dt, scale, rng)
     measured = {}
     for name, sensor in SENSORS.items():
         clean = torque if name == "driver_torque" else columns[name]
-        measured[name] = measure_signal(np.asarray(clean, dtype=float), sensor, dt, scale, rng)
+        clean = np.asarray(clean, dtype=float)
+        measured[name] = with_errors(clean, *errors[name], sensor, scale)
     for name, (source, time_constant) in DERIVATIVES.items():
         measured[name] = ecu_derivative(measured[source], dt, time_constant)
     measured["slip_angle"] = np.arctan2(measured["lateral_velocity"], speed)
     torque = measured.pop("driver_torque")
     return {name: measured[name] for name in columns}, torque
+
+
+class SensorStream:
+    """The logger of :func:`measure`, one sample at a time: the same errors (drawn beforehand
+    by :func:`draw_errors`), the same quantisation and the same causal ECU derivatives, so that
+    a closed loop can feed a driver model what the logger would record.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Output order of the measured features.
+    errors : dict of str to ndarray, or None
+        :func:`draw_errors`' output; ``None`` (with ``scale=None``) measures the clean states.
+    dt, speed, scale : float
+        As for :func:`measure`.
+    """
+
+    def __init__(self, names, errors, dt, speed, scale):
+        self.names, self.errors, self.dt, self.speed, self.scale = names, errors, dt, speed, scale
+        self._gains = {name: dt / (tc + dt) for name, (_, tc) in DERIVATIVES.items()}
+        self._previous = {}  # last measured value of every differentiated source
+        self._filtered = dict.fromkeys(DERIVATIVES, 0.0)
+
+    def features(self, i, columns):
+        """The measured features of sample ``i`` from the clean ``columns`` (a dict)."""
+        if self.scale is None:
+            return np.array([columns[name] for name in self.names])
+        measured = {
+            name: self._read(name, sensor, i, columns[name])
+            for name, sensor in SENSORS.items()
+            if name != "driver_torque"
+        }
+        for name, (source, _) in DERIVATIVES.items():
+            value = measured[source]
+            previous = self._previous.get(source, value)  # the first difference is zero
+            self._previous[source] = value
+            gain = self._gains[name]
+            # lfilter([gain], [1, gain - 1]) of the backward difference, term by term
+            self._filtered[name] = (
+                gain * ((value - previous) / self.dt) - (gain - 1.0) * (self._filtered[name])
+            )
+            measured[name] = self._filtered[name]
+        measured["slip_angle"] = math.atan2(measured["lateral_velocity"], self.speed)
+        return np.array([measured[name] for name in self.names])
+
+    def torque(self, i, torque):
+        """The driver torque of sample ``i`` as the torque sensor reads it."""
+        if self.scale is None:
+            return torque
+        return self._read("driver_torque", SENSORS["driver_torque"], i, torque)
+
+    def _read(self, name, sensor, i, value):
+        white, drift = self.errors[name]
+        return float(with_errors(value, white[i], drift[i], sensor, self.scale))

@@ -46,8 +46,28 @@ def _check_scenario(scenario):
     return scenario
 
 
-def _simulate(road, offsets, vehicle, driver, speed, n_samples, n_sub, dt, rng):
-    """Integrate the closed loop with semi-implicit Euler; return logged states (n_samples, 14)."""
+def draw_remnants(driver, n_steps, dt, rng):
+    """The human driver's coloured noises over ``n_steps`` integration steps: on the desired
+    angle, on the torque, and the lane wander (drawn for every driver, so that the sensor
+    errors drawn next are the same whoever drives)."""
+    return (
+        coloured_noise(n_steps, dt, driver.angle_remnant_time, driver.angle_remnant, rng),
+        coloured_noise(n_steps, dt, 0.1, driver.torque_remnant, rng),
+        coloured_noise(n_steps, dt, driver.lane_wander_time, driver.lane_wander, rng),
+    )
+
+
+def _simulate(
+    road, offsets, vehicle, driver, speed, n_samples, n_sub, dt, remnants, torque_source=None
+):
+    """Integrate the closed loop with semi-implicit Euler; return logged states (n_samples, 14).
+
+    ``torque_source``: another driver than the human of ``driver``, called at every logged
+    sample as ``torque_source(row, states)`` with the states of the logged columns but the
+    torque (the steering-wheel acceleration of the integration step before); its torque acts
+    at the torsion bar until the next sample. It may lose control: the log then ends at the
+    sample where the lateral deviation first exceeds :data:`LOST_CONTROL`.
+    """
     n_steps = n_samples * n_sub
     u = speed
     m, iz, lf, lr = vehicle.mass, vehicle.yaw_inertia, vehicle.front_distance, vehicle.rear_distance
@@ -65,8 +85,10 @@ def _simulate(road, offsets, vehicle, driver, speed, n_samples, n_sub, dt, rng):
     )
     b_sw, fric, fric_v = vehicle.wheel_damping, vehicle.wheel_friction, vehicle.friction_velocity
     g0, g1, a_max = vehicle.assist_gain, vehicle.assist_gain_slope, vehicle.assist_max
-    # driver constants
+    # driver constants (a torque source has no arm impedance of its own)
     j_arm, b_arm, k_arm = driver.arm_inertia, driver.arm_damping, driver.arm_stiffness
+    if torque_source is not None:
+        j_arm = b_arm = 0.0
     j_sw = vehicle.wheel_inertia
     act_lag = dt / (driver.activation_time + dt)
     look = speed * driver.preview_time
@@ -86,58 +108,80 @@ def _simulate(road, offsets, vehicle, driver, speed, n_samples, n_sub, dt, rng):
     curv, near, far = road.curvature.tolist(), offsets.tolist(), far.tolist()
     cut_near, cut_far = cut.tolist(), road.at(cut, grid + look).tolist()
     inv_ds = 1.0 / (grid[1] - grid[0])
-    angle_noise = coloured_noise(
-        n_steps, dt, driver.angle_remnant_time, driver.angle_remnant, rng
-    ).tolist()
-    torque_noise = coloured_noise(n_steps, dt, 0.1, driver.torque_remnant, rng).tolist()
-    wander = coloured_noise(n_steps, dt, driver.lane_wander_time, driver.lane_wander, rng).tolist()
+    angle_noise, torque_noise, wander = (noise.tolist() for noise in remnants)
     effort = driver.torque_remnant_effort
 
     tanh, sin, cos, sqrt = math.tanh, math.sin, math.cos, math.sqrt
     s = e_y = e_psi = s_d = e_y_d = e_psi_d = 0.0
-    theta = theta_d = v = r = phi = phi_d = 0.0
+    theta = theta_d = theta_dd = v = r = phi = phi_d = 0.0
     t_muscle = t_driver = theta_des = 0.0
     delay_line = [0.0] * n_delay
     log = np.empty((n_samples, 14))
     row = 0
     for k in range(n_steps):
+        sample = k % n_sub == 0
+        if sample and abs(e_y) > LOST_CONTROL:
+            if torque_source is not None:
+                return log[:row]
+            raise RuntimeError(
+                f"The driver lost control {k * dt:.1f} s into the recording "
+                f"(lateral deviation {e_y:.1f} m); driver parameters: {driver}."
+            )
+        if torque_source is None:
+            x = s * inv_ds
+            i = int(x)
+            f = x - i
+            # the intended line (corner cut + wander) stays within LINE_LIMIT of the lane centre
+            line = cut_near[i] + f * (cut_near[i + 1] - cut_near[i]) + wander[k]
+            lane = near[i] + f * (near[i + 1] - near[i]) + max(-LINE_LIMIT, min(LINE_LIMIT, line))
+            line = cut_far[i] + f * (cut_far[i + 1] - cut_far[i]) + wander[k]
+            aim = far[i] + f * (far[i + 1] - far[i]) + max(-LINE_LIMIT, min(LINE_LIMIT, line))
+
+            # visual layer, acting after the reaction delay; the lead acts on the far-point drift
+            e_far = aim - e_y - look * e_psi
+            e_far += lead * ((far[i + 1] - far[i]) * inv_ds * s_d - e_y_d - look * e_psi_d)
+            e_near = e_y - lane
+            outside = e_near - tol * tanh(e_near / tol)
+            outside *= 1.0 + (e_near * inv_edge) ** 2
+            theta_vis = angle_gain * (far_gain * e_far - near_gain * outside) + angle_noise[k]
+            j = k % n_delay
+            delayed = delay_line[j]
+            delay_line[j] = theta_vis
+            if n_hold == 0 or k % n_hold == 0:
+                theta_des = delayed
+
+            # neuromuscular layer: the activation lag acts on the command (expected steering
+            # feel plus the equilibrium point of the arm stiffness), the arm impedance at once
+            load = feel * theta_des
+            t_ff = math.copysign(
+                (sqrt(fb0 * fb0 + 4.0 * fb1 * abs(load)) - fb0) / (2.0 * fb1), load
+            )
+            t_muscle += act_lag * (t_ff + k_arm * theta_des - t_muscle)
+            t_hand = t_muscle - k_arm * theta
+            t_hand += (1.0 + effort * abs(t_hand)) * torque_noise[k]
         x = s * inv_ds
         i = int(x)
-        f = x - i
-        kappa = curv[i] + f * (curv[i + 1] - curv[i])
-        # the intended line (corner cut + wander) stays within LINE_LIMIT of the lane centre
-        line = cut_near[i] + f * (cut_near[i + 1] - cut_near[i]) + wander[k]
-        lane = near[i] + f * (near[i + 1] - near[i]) + max(-LINE_LIMIT, min(LINE_LIMIT, line))
-        line = cut_far[i] + f * (cut_far[i + 1] - cut_far[i]) + wander[k]
-        aim = far[i] + f * (far[i + 1] - far[i]) + max(-LINE_LIMIT, min(LINE_LIMIT, line))
+        kappa = curv[i] + (x - i) * (curv[i + 1] - curv[i])
 
-        # visual layer, acting after the reaction delay; the lead acts on the far-point drift
-        e_far = aim - e_y - look * e_psi
-        e_far += lead * ((far[i + 1] - far[i]) * inv_ds * s_d - e_y_d - look * e_psi_d)
-        e_near = e_y - lane
-        outside = e_near - tol * tanh(e_near / tol)
-        outside *= 1.0 + (e_near * inv_edge) ** 2
-        theta_vis = angle_gain * (far_gain * e_far - near_gain * outside) + angle_noise[k]
-        j = k % n_delay
-        delayed = delay_line[j]
-        delay_line[j] = theta_vis
-        if n_hold == 0 or k % n_hold == 0:
-            theta_des = delayed
-
-        # neuromuscular layer: the activation lag acts on the command (expected steering feel
-        # plus the equilibrium point of the arm stiffness), the arm impedance acts at once
-        load = feel * theta_des
-        t_ff = math.copysign((sqrt(fb0 * fb0 + 4.0 * fb1 * abs(load)) - fb0) / (2.0 * fb1), load)
-        t_muscle += act_lag * (t_ff + k_arm * theta_des - t_muscle)
-        t_hand = t_muscle - k_arm * theta
-        t_hand += (1.0 + effort * abs(t_hand)) * torque_noise[k]
-
-        # tyres, aligning torque, power assist (sensing last step's driver torque)
+        # tyres, aligning torque, vehicle (none of which depends on this step's torque)
         alpha_f = theta / ratio - (v + lf * r) / u
         alpha_r = (lr * r - v) / u
         force_f = f_max * tanh(cf * alpha_f / f_max)
         force_r = r_max * tanh(cr * alpha_r / r_max)
         trail = t_mech + t_pneu * max(0.0, 1.0 - abs(alpha_f) / slip_t)
+        v_d = (force_f + force_r) / m - u * r
+        r_d = (lf * force_f - lr * force_r) / iz
+        a_y = v_d + u * r
+        phi_dd = (ms_h * a_y - k_roll * phi - c_roll * phi_d) / ix
+        s_d = (u * cos(e_psi) - v * sin(e_psi)) / (1.0 - kappa * e_y)
+        e_y_d = u * sin(e_psi) + v * cos(e_psi)
+        if torque_source is not None and sample:
+            states = (theta, theta_d, theta_dd, v, a_y, r, r_d, phi, phi_d, phi_dd, s, e_y, e_psi)
+            t_hand = torque_source(row, states)
+            log[row] = (*states, t_hand)
+            row += 1
+
+        # power assist (sensing last step's driver torque).
         # The boost gain is frozen at last step's torque, which makes the rigid-column balance
         # J_sw theta'' = (1 + gain) T_d - loads, with T_d = T_hand - B theta' - J_arm theta'',
         # linear in theta'' (a lagged assist would feed back the arm inertia and oscillate).
@@ -149,20 +193,7 @@ def _simulate(road, offsets, vehicle, driver, speed, n_samples, n_sub, dt, rng):
         theta_dd = ((1.0 + gain) * t_arm - loads) / (j_sw + (1.0 + gain) * j_arm)
         t_driver = t_arm - j_arm * theta_dd
 
-        # vehicle
-        v_d = (force_f + force_r) / m - u * r
-        r_d = (lf * force_f - lr * force_r) / iz
-        a_y = v_d + u * r
-        phi_dd = (ms_h * a_y - k_roll * phi - c_roll * phi_d) / ix
-        s_d = (u * cos(e_psi) - v * sin(e_psi)) / (1.0 - kappa * e_y)
-        e_y_d = u * sin(e_psi) + v * cos(e_psi)
-
-        if k % n_sub == 0:
-            if abs(e_y) > LOST_CONTROL:
-                raise RuntimeError(
-                    f"The driver lost control {k * dt:.1f} s into the recording "
-                    f"(lateral deviation {e_y:.1f} m); driver parameters: {driver}."
-                )
+        if torque_source is None and sample:
             log[row] = (
                 theta,
                 theta_d,
@@ -225,6 +256,70 @@ def _features(log, road, vehicle, speed):
     return {name: columns[name] for name in FEATURE_NAMES}, torque
 
 
+class Section:
+    """One simulated section before anyone drives it: the seeds' road, manoeuvres, the
+    human's parameters and remnants, in the order :func:`make_lane_keeping` draws them."""
+
+    def __init__(
+        self,
+        duration,
+        setting,
+        driver,
+        speed_kmh,
+        sampling_rate,
+        scenario,
+        random_state,
+        road_random_state,
+    ):
+        rng = check_random_state(random_state)
+        road_rng = rng if road_random_state is None else check_random_state(road_random_state)
+        self.rng = rng
+        self.parameters = sample_driver(check_driver(driver), rng)
+        self.vehicle = VehicleParameters()
+        self.speed = speed_kmh / 3.6
+        self.sampling_rate, self.setting, self.scenario = sampling_rate, setting, scenario
+        self.n_samples = int(round(duration * sampling_rate))
+        self.n_sub = max(1, math.ceil(INTERNAL_RATE / sampling_rate))
+        self.dt = 1.0 / (sampling_rate * self.n_sub)
+        margin = 300.0 + self.speed * self.parameters.preview_time * 2.0
+        length = self.speed * duration * 1.05 + margin
+        self.road = make_road(length, setting=setting, scenario=scenario, random_state=road_rng)
+        self.offsets = manoeuvre_offsets(self.road, scenario, road_rng)
+        self.remnants = draw_remnants(
+            self.parameters, self.n_samples * self.n_sub, self.dt, self.rng
+        )
+
+    def simulate(self, torque_source=None):
+        """The logged states of the closed loop (see :func:`_simulate`)."""
+        return _simulate(
+            self.road,
+            self.offsets,
+            self.vehicle,
+            self.parameters,
+            self.speed,
+            self.n_samples,
+            self.n_sub,
+            self.dt,
+            self.remnants,
+            torque_source,
+        )
+
+    def frame(self, features, torque, *, recording, driver, split, scale):
+        """The tidy frame of the measured ``features`` and ``torque``."""
+        return tidy_frame(
+            {
+                RECORDING: recording,
+                DRIVER: driver,
+                SETTING: self.setting,
+                SPLIT: split,
+                TIME: np.arange(len(torque)) / self.sampling_rate,
+                **features,
+                TARGET: torque,
+            },
+            attrs={"scenario": self.scenario, "speed": self.speed, "sensor_noise": scale},
+        )
+
+
 def _make_lane_keeping(
     duration,
     setting,
@@ -238,37 +333,28 @@ def _make_lane_keeping(
     split,
     sensor_noise=None,
 ):
-    rng = check_random_state(random_state)
-    road_rng = rng if road_random_state is None else check_random_state(road_random_state)
-    style = driver if isinstance(driver, str) else "custom"
-    parameters = sample_driver(check_driver(driver), rng)
-    vehicle = VehicleParameters()
-    speed = speed_kmh / 3.6
-    n_samples = int(round(duration * sampling_rate))
-    n_sub = max(1, math.ceil(INTERNAL_RATE / sampling_rate))
-    dt = 1.0 / (sampling_rate * n_sub)
-    margin = 300.0 + speed * parameters.preview_time * 2.0
-    length = speed * duration * 1.05 + margin
-    road = make_road(length, setting=setting, scenario=scenario, random_state=road_rng)
-    offsets = manoeuvre_offsets(road, scenario, road_rng)
-    log = _simulate(road, offsets, vehicle, parameters, speed, n_samples, n_sub, dt, rng)
-    features, torque = _features(log, road, vehicle, speed)
+    section = Section(
+        duration,
+        setting,
+        driver,
+        speed_kmh,
+        sampling_rate,
+        scenario,
+        random_state,
+        road_random_state,
+    )
+    log = section.simulate()
+    features, torque = _features(log, section.road, section.vehicle, section.speed)
     # sensors: drawn after the closed loop, which therefore does not depend on sensor_noise
     scale = check_sensor_noise(sensor_noise)
-    features, torque = measure(features, torque, 1.0 / sampling_rate, speed, scale, rng)
+    features, torque = measure(
+        features, torque, 1.0 / sampling_rate, section.speed, scale, section.rng
+    )
+    style = driver if isinstance(driver, str) else "custom"
     if recording is None:
         recording = f"{style}-{scenario}-s{setting}"
-    return tidy_frame(
-        {
-            RECORDING: recording,
-            DRIVER: style,
-            SETTING: setting,
-            SPLIT: split,
-            TIME: np.arange(n_samples) / sampling_rate,
-            **features,
-            TARGET: torque,
-        },
-        attrs={"scenario": scenario, "speed": speed, "sensor_noise": scale},
+    return section.frame(
+        features, torque, recording=recording, driver=style, split=split, scale=scale
     )
 
 

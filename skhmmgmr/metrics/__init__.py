@@ -6,6 +6,7 @@ The definitions (RMSE, accuracy, smoothness, the D.5 normalisation) are in the d
 """
 
 from .._core._public import publish
+from ._lane_keeping import LANE_KEEPING_METRICS, lane_keeping_metrics
 from ._scorers import (
     AccuracyScore,
     PerformanceScore,
@@ -25,11 +26,13 @@ from ._scores import (
 
 __all__ = [
     "AccuracyScore",
+    "LANE_KEEPING_METRICS",
     "PerformanceScore",
     "SmoothnessScore",
     "UngroupedScoringWarning",
     "accuracy_score",
     "evaluate_recordings",
+    "lane_keeping_metrics",
     "make_performance_scorers",
     "normalize_performance",
     "performance_score",
