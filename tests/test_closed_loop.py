@@ -234,3 +234,56 @@ def test_lane_keeping_metrics_refuse_bad_input():
         lane_keeping_metrics(frame.drop(columns="time"))
     with pytest.raises(TypeError, match="pandas DataFrame"):
         lane_keeping_metrics(frame.to_numpy())
+
+
+def test_the_wide_lane_scenario_is_one_5_m_lane_of_straights_and_sinusoids():
+    wide = make_lane_keeping(120.0, scenario="wide_lane", sampling_rate=20.0, random_state=2)
+    narrow = make_lane_keeping(120.0, sampling_rate=20.0, random_state=2)
+    assert wide.attrs["lane_width"] == 5.0 and narrow.attrs["lane_width"] == 3.5
+    assert (wide["manoeuvre"] == "lane_keeping").all() and wide["crossing_time"].isna().all()
+    # no radius below 300 m (curvature sensor noise aside); long straights in between
+    curvature = make_lane_keeping(
+        120.0, scenario="wide_lane", sampling_rate=20.0, random_state=2, sensor_noise=None
+    )["road_curvature_0m"]
+    assert np.abs(curvature).max() <= 1 / 300 + 1e-12
+    assert (np.abs(curvature) < 1e-12).mean() > 0.2
+    # the driver uses the room: a wider spread, the car's centre still in the lane
+    deviation, narrow_deviation = wide["lateral_deviation_0m"], narrow["lateral_deviation_0m"]
+    assert deviation.abs().max() < 2.5
+    assert deviation.abs().max() > narrow_deviation.abs().max()
+    assert (
+        lane_keeping_metrics(wide)["departures"]
+        <= lane_keeping_metrics(wide, lane_width=3.5)["departures"]
+    )
+
+
+def test_manoeuvre_labels_and_crossing_times_of_a_hand_made_drive():
+    section = Section(2.0, 7, "defensive", 100.0, 10.0, "highway", 0, None)
+    section.road.manoeuvres = [(100.0, 160.0, "lane_change_left"), (200.0, 230.0, "evasive")]
+    s = np.arange(0.0, 300.0, 10.0)
+    lateral = np.zeros_like(s)
+    lateral[(s >= 100) & (s < 160)] = [0.5, 1.0, 1.7, 1.8, 3.0, 3.4]  # crosses 1.75 at s=130
+    lateral[(s >= 200) & (s < 230)] = [-1.0, -1.5, -1.7]  # never crosses
+    log = np.zeros((len(s), 14))
+    log[:, 10], log[:, 11] = s, lateral
+    labels, crossing = section.manoeuvres(log)
+    assert list(labels[9:17]) == ["lane_keeping"] + ["lane_change_left"] * 6 + ["lane_keeping"]
+    assert list(labels[20:23]) == ["evasive"] * 3
+    assert_allclose(crossing[10:16], 13 / 10.0)  # row 13 (s = 130 m) at 10 Hz
+    assert np.isnan(crossing[:10]).all() and np.isnan(crossing[16:]).all()
+
+
+def test_every_lane_change_of_the_human_crosses_the_marking_during_the_manoeuvre():
+    frame = make_lane_keeping(
+        300.0, scenario="lane_change", sampling_rate=20.0, random_state=4, sensor_noise=None
+    )
+    changes = frame[frame["manoeuvre"].str.startswith("lane_change")]
+    assert set(changes["manoeuvre"]) == {"lane_change_left", "lane_change_right"}
+    blocks = (frame["manoeuvre"] != frame["manoeuvre"].shift()).cumsum()
+    for _, block in changes.groupby(blocks[changes.index]):
+        crossing = block["crossing_time"].iloc[0]
+        assert (block["crossing_time"] == crossing).all()
+        assert block["time"].iloc[0] < crossing <= block["time"].iloc[-1]
+        # the car's centre crosses there; the front axle, ahead on a heading, a little earlier
+        at = frame.loc[np.isclose(frame["time"], crossing), "lateral_deviation_0m"].iloc[0]
+        assert abs(abs(at) - 1.75) < 0.3

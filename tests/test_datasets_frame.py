@@ -261,3 +261,30 @@ def test_comma2k19_goes_through_the_builder(tmp_path):
     with pytest.raises(ValueError) as excinfo:
         load_comma2k19_segment(_fake_segment(tmp_path / "bad", np.nan), recording="seg")
     assert _message(excinfo) == _nan_message("speed", "seg", "row 0, time 0", 41)
+
+
+def test_a_tidy_frame_keeps_the_manoeuvre_and_its_crossing_time():
+    frame = tidy_frame(
+        {
+            "recording": "r",
+            "time": [0.0, 0.1, 0.2],
+            "manoeuvre": ["lane_keeping", "evasive", "evasive"],
+            "crossing_time": [np.nan, 0.2, 0.2],
+            "yaw_rate": [0.0, 0.1, 0.2],
+        }
+    )
+    assert list(frame.columns) == [
+        "recording",
+        "driver",
+        "setting",
+        "split",
+        "time",
+        "manoeuvre",
+        "crossing_time",
+        "yaw_rate",
+    ]
+    assert frame.attrs["units"] == {"time": "s", "crossing_time": "s", "yaw_rate": "rad/s"}
+    with pytest.raises(ValueError, match="'manoeuvre' is empty"):
+        tidy_frame({"recording": "r", "manoeuvre": [None, "evasive"], "yaw_rate": [0.0, 1.0]})
+    with pytest.raises(ValueError, match="crossing_time"):
+        tidy_frame({"recording": "r", "crossing_time": [np.inf, 1.0], "yaw_rate": [0.0, 1.0]})

@@ -60,9 +60,14 @@ def test_same_seed_same_frame():
 def test_columns_units_and_sampling():
     frame = make_lane_keeping(2.0, sampling_rate=50.0, random_state=0, recording="r", split="test")
     assert list(frame.columns) == [*META_COLUMNS, *FEATURE_NAMES, TARGET]
-    assert frame.shape == (100, 24)
+    assert frame.shape == (100, 26)
     np.testing.assert_allclose(frame["time"], np.arange(100) / 50.0)
-    assert frame.attrs["units"] == {"time": "s", **FEATURE_UNITS, TARGET: "Nm"}
+    assert frame.attrs["units"] == {
+        "time": "s",
+        "crossing_time": "s",
+        **FEATURE_UNITS,
+        TARGET: "Nm",
+    }
     assert set(frame["recording"]) == {"r"} and set(frame["split"]) == {"test"}
     assert set(frame["driver"]) == {"defensive"} and set(frame["setting"]) == {7}
     assert np.isfinite(frame[[*FEATURE_NAMES, TARGET]].to_numpy()).all()

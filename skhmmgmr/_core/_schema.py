@@ -12,7 +12,12 @@ SPLIT = "split"
 TIME = "time"
 TARGET = "driver_torque"
 
-META_COLUMNS = (RECORDING, DRIVER, SETTING, SPLIT, TIME)
+# What the driver is doing (simulated frames): keeping the lane or a manoeuvre of MANOEUVRES,
+# and for the rows of a manoeuvre the time [s] its car crosses a lane marking (NaN if never).
+MANOEUVRE = "manoeuvre"
+CROSSING_TIME = "crossing_time"
+MANOEUVRES = ("lane_keeping", "lane_change_left", "lane_change_right", "evasive")
+META_COLUMNS = (RECORDING, DRIVER, SETTING, SPLIT, TIME, MANOEUVRE, CROSSING_TIME)
 
 # The 18 candidate features of the thesis (Table B.2), in its order, with SI units.
 FEATURE_UNITS = {

@@ -114,7 +114,7 @@ def drive(
     ...     human[list(PREVIEW_FEATURES)], human["driver_torque"])
     >>> run = drive(model, duration=30.0, sampling_rate=50.0, random_state=1)
     >>> run.shape, run["driver"].iloc[0]
-    ((1500, 24), 'HMMGMRRegressor')
+    ((1500, 26), 'HMMGMRRegressor')
     >>> bool(lane_keeping_metrics(run)["lateral_deviation_max"] < 1.75)
     True
     """
@@ -181,6 +181,7 @@ def drive(
     if recording is None:
         recording = f"{name}-{scenario}-s{setting}"
     frame = section.frame(
+        log,
         dict(zip(FEATURE_NAMES, sensed[:n_driven].T, strict=True)),
         torques[:n_driven],
         recording=recording,

@@ -12,8 +12,10 @@ import numpy as np
 import pandas as pd
 
 from .._core._schema import (
+    CROSSING_TIME,
     DRIVER,
     FEATURE_UNITS,
+    MANOEUVRE,
     META_COLUMNS,
     RECORDING,
     SETTING,
@@ -70,6 +72,7 @@ def tidy_frame(
     -------
     frame : pandas.DataFrame
         The meta columns ``recording, driver, setting, split, time`` (``time`` only if given),
+        then ``manoeuvre`` (text) and ``crossing_time`` (seconds, NaN allowed) if given,
         the other columns in the order given, then ``driver_torque`` if given. Recording,
         driver and split are text; the time, the features and the target are float64; the
         setting keeps its dtype. ``attrs["units"]`` maps the time, feature and target columns,
@@ -107,19 +110,30 @@ def tidy_frame(
     numeric = [TIME] * (TIME in given) + others + [TARGET] * (TARGET in given)
 
     out = {name: _values(given[name], n_rows) for name in (RECORDING, DRIVER, SETTING, SPLIT)}
+    if TIME in given:
+        out[TIME] = _floats(TIME, given[TIME], n_rows)
+    if MANOEUVRE in given:
+        out[MANOEUVRE] = _values(given[MANOEUVRE], n_rows)
+    if CROSSING_TIME in given:
+        out[CROSSING_TIME] = _floats(CROSSING_TIME, given[CROSSING_TIME], n_rows)
     out.update({name: _floats(name, given[name], n_rows) for name in numeric})
     rows = _Rows(n_rows, source, row, out.get(TIME))
     out[RECORDING] = rows.recording = rows.text(RECORDING, out[RECORDING])
-    for name in (DRIVER, SPLIT):
-        out[name] = rows.text(name, out[name])
+    for name in (DRIVER, SPLIT, MANOEUVRE):
+        if name in out:
+            out[name] = rows.text(name, out[name])
     rows.check_finite({name: out[name] for name in numeric}, allow_nan=allow_missing, time=TIME)
+    if CROSSING_TIME in given:  # NaN: a manoeuvre row whose car crosses no marking
+        rows.check_finite({CROSSING_TIME: out[CROSSING_TIME]}, allow_nan=True)
     codes = rows.check_contiguous()
     if TIME in out:
         rows.check_time(codes, sampling_rate)
 
     frame = pd.DataFrame(out)
-    all_units = {TIME: "s", TARGET: TARGET_UNIT, **FEATURE_UNITS, **(units or {})}
-    frame.attrs["units"] = {name: all_units.get(name, UNKNOWN) for name in numeric}
+    all_units = {TIME: "s", CROSSING_TIME: "s", TARGET: TARGET_UNIT, **FEATURE_UNITS}
+    all_units.update(units or {})
+    measured = [c for c in frame.columns if c in numeric or c == CROSSING_TIME]
+    frame.attrs["units"] = {name: all_units.get(name, UNKNOWN) for name in measured}
     frame.attrs.update(attrs or {})
     return frame
 

@@ -32,6 +32,13 @@ RUN_IN_LENGTH = 100.0  # [m] straight before the first element, the car starts o
 GRID_STEP = 0.25  # [m] arc-length step of the tabulated road
 LANE_WIDTH = 3.5  # [m]
 N_LANES = 3
+# Stress scenario "wide_lane" (Appendix E.4): one 5 m lane, straights alternating with
+# sinusoidal segments y = A sin(2 pi x / L) of amplitude A whose tightest radius is R.
+WIDE_LANE_WIDTH = 5.0  # [m]
+WIDE_LANE_STRAIGHTS = tuple(range(300, 801, 100))  # [m]
+WIDE_LANE_AMPLITUDES = (1.0, 2.0, 3.0, 4.0)  # [m]
+WIDE_LANE_RADII = (300, 400, 500, 600)  # [m] tightest radius of a sinusoidal segment
+WIDE_LANE_PERIODS = (1, 2, 3)  # full periods per sinusoidal segment
 
 
 class _BalancedPool:
@@ -68,6 +75,8 @@ class Road:
     def __init__(self, elements, curvature):
         self.elements = elements
         self.curvature = curvature
+        self.lane_width = LANE_WIDTH
+        self.manoeuvres = []  # (start, stop, label), see manoeuvre_offsets
         self.s = np.arange(curvature.size) * GRID_STEP
         # Trapezoidal integrals: heading, then the integral of the heading (for lateral offsets).
         self.heading = _cumulative_trapezoid(curvature, GRID_STEP)
@@ -173,8 +182,10 @@ def make_road(length, *, setting=7, scenario="highway", random_state=None):
     setting : int, default=7
         Radius setting of Table B.1 (1 to 7).
     scenario : str, default="highway"
-        "sharp_corners" replaces the setting's radii by 175-300 m (25 m grid); any other scenario
-        uses the setting.
+        "sharp_corners" replaces the setting's radii by 175-300 m (25 m grid); "wide_lane" is one
+        5 m lane of straights (300-800 m) alternating with 1 to 3 periods of sinusoidal
+        segments of amplitude 1-4 m and tightest radius 300-600 m (the setting is not used);
+        any other scenario uses the setting.
     random_state : numpy.random.RandomState
         Source of randomness.
 
@@ -183,11 +194,57 @@ def make_road(length, *, setting=7, scenario="highway", random_state=None):
     road : Road
     """
     rng = random_state
-    elements = draw_elements(RUN_IN_LENGTH + length, radii_of(setting, scenario), rng)
+    if scenario == "wide_lane":
+        elements = draw_wide_lane_elements(RUN_IN_LENGTH + length, rng)
+    else:
+        elements = draw_elements(RUN_IN_LENGTH + length, radii_of(setting, scenario), rng)
     end = elements[-1]["start"] + elements[-1]["length"]
     n_grid = int(math.ceil(end / GRID_STEP)) + 1
+    if scenario == "wide_lane":
+        road = Road(elements, sine_curvature(elements, n_grid))
+        road.lane_width = WIDE_LANE_WIDTH
+        return road
     curvature = smooth_curvature(step_curvature(elements, n_grid))
     return Road(elements, curvature)
+
+
+def draw_wide_lane_elements(length, rng):
+    """Straights alternating with sinusoidal segments until ``length`` [m] (Appendix E.4's
+    wide-lane road): each segment ``periods`` full periods of ``y = A sin(2 pi x / L)``, with
+    ``L = 2 pi sqrt(A R)`` so that its tightest radius is ``R``."""
+    straights = _BalancedPool(WIDE_LANE_STRAIGHTS, rng)
+    amplitudes = _BalancedPool(WIDE_LANE_AMPLITUDES, rng)
+    radii = _BalancedPool(WIDE_LANE_RADII, rng)
+    periods = _BalancedPool(WIDE_LANE_PERIODS, rng)
+    elements, start = [], RUN_IN_LENGTH
+    while start < length:
+        straight = dict(kind="straight", direction="straight", radius=None, angle=None)
+        straight.update(length=float(straights.draw()), start=start)
+        elements.append(straight)
+        start += straight["length"]
+        amplitude, radius = float(amplitudes.draw()), float(radii.draw())
+        wavelength = 2.0 * math.pi * math.sqrt(amplitude * radius)
+        sine = dict(kind="sine", direction="both", radius=radius, angle=None)
+        sine.update(amplitude=amplitude, wavelength=wavelength, start=start)
+        sine["length"] = wavelength * periods.draw()
+        elements.append(sine)
+        start += sine["length"]
+    return elements
+
+
+def sine_curvature(elements, n_grid):
+    """Curvature [1/m] of the sinusoidal segments (``-A (2 pi / L)^2 sin(2 pi x / L)``, small
+    angles), zero on the straights."""
+    s = np.arange(n_grid) * GRID_STEP
+    curvature = np.zeros(n_grid)
+    for element in elements:
+        if element["kind"] != "sine":
+            continue
+        x = s - element["start"]
+        inside = (x >= 0.0) & (x < element["length"])
+        k = 2.0 * math.pi / element["wavelength"]
+        curvature[inside] = -element["amplitude"] * k * k * np.sin(k * x[inside])
+    return curvature
 
 
 def manoeuvre_offsets(road, scenario, rng):
@@ -196,8 +253,12 @@ def manoeuvre_offsets(road, scenario, rng):
     "lane_change" moves to the left or right lane (3.5 m) every 300-800 m, with a half-cosine
     transition over 100-150 m, and back. "evasive" inserts sudden double lane changes of 2.5-3.5 m
     over 30-40 m every 300-600 m (an obstacle in the lane). Other scenarios keep the lane centre.
+    The manoeuvres are in ``road.manoeuvres``: ``(start, stop, label)`` arc lengths [m] and one
+    of :data:`~skhmmgmr._core._schema.MANOEUVRES` (a lane change to the left lane and the one
+    back from the right lane are both ``"lane_change_left"``).
     """
     offset = np.zeros_like(road.s)
+    road.manoeuvres = []
     if scenario not in ("lane_change", "evasive"):
         return offset
     s_now, lane = RUN_IN_LENGTH + 200.0, 0.0
@@ -206,6 +267,8 @@ def manoeuvre_offsets(road, scenario, rng):
             target = 0.0 if lane != 0.0 else LANE_WIDTH * rng.choice((-1.0, 1.0))
             ramp = rng.uniform(100.0, 150.0)
             _add_ramp(offset, road.s, s_now, ramp, target - lane)
+            side = "left" if target > lane else "right"
+            road.manoeuvres.append((s_now, s_now + ramp, f"lane_change_{side}"))
             lane = target
             s_now += ramp + rng.uniform(300.0, 800.0)
         else:
@@ -213,8 +276,17 @@ def manoeuvre_offsets(road, scenario, rng):
             ramp, hold = rng.uniform(30.0, 40.0), rng.uniform(15.0, 30.0)
             _add_ramp(offset, road.s, s_now, ramp, shift)
             _add_ramp(offset, road.s, s_now + ramp + hold, ramp, -shift)
+            road.manoeuvres.append((s_now, s_now + 2 * ramp + hold, "evasive"))
             s_now += 2 * ramp + hold + rng.uniform(300.0, 600.0)
     return offset
+
+
+def manoeuvre_of(road, s):
+    """The manoeuvre label of every arc length ``s`` (``"lane_keeping"`` outside them)."""
+    labels = np.full(len(s), "lane_keeping", dtype=object)
+    for start, stop, label in road.manoeuvres:
+        labels[(s >= start) & (s < stop)] = label
+    return labels
 
 
 def _add_ramp(offset, s, start, length, height):

@@ -7,19 +7,29 @@ import os
 import numpy as np
 from sklearn.utils import check_random_state
 
-from .._core._schema import DRIVER, FEATURE_NAMES, RECORDING, SETTING, SPLIT, TARGET, TIME
+from .._core._schema import (
+    CROSSING_TIME,
+    DRIVER,
+    FEATURE_NAMES,
+    MANOEUVRE,
+    RECORDING,
+    SETTING,
+    SPLIT,
+    TARGET,
+    TIME,
+)
 from ._driver import check_driver, coloured_noise, sample_driver
 from ._frame import tidy_frame
-from ._road import SETTINGS, make_road, manoeuvre_offsets
+from ._road import LANE_WIDTH, SETTINGS, make_road, manoeuvre_of, manoeuvre_offsets
 from ._sensors import check_sensor_noise, measure
 from ._vehicle import VehicleParameters
 
-SCENARIOS = ("highway", "sharp_corners", "lane_change", "evasive")
+SCENARIOS = ("highway", "sharp_corners", "lane_change", "evasive", "wide_lane")
 INTERNAL_RATE = 200.0  # [Hz] minimum integration rate
 PREVIEW_DISTANCES = (10.0, 30.0)  # [m] road sensors ahead of the front axle
 LOST_CONTROL = 10.0  # [m] lateral deviation at which the simulation stops
 CORNER_CUT_RADIUS = 300.0  # [m] radius at which the corner cut is corner_cutting * tolerance
-LINE_LIMIT = 0.8  # [m] largest intended offset from the lane centre (car half-width 0.9 m)
+LINE_LIMIT = 0.8  # [m] largest intended offset from the centre of a 3.5 m lane (car 1.8 m wide)
 
 
 def _check_positive(value, name):
@@ -94,8 +104,13 @@ def _simulate(
     look = speed * driver.preview_time
     far_gain = 2.0 / (look * look)
     lead = driver.lead_time
-    near_gain, tol = driver.near_gain, driver.lane_tolerance
-    inv_edge = 1.0 / driver.edge_deviation if driver.edge_deviation > 0 else 0.0
+    # A wider lane leaves the driver more room: the tolerated band, the corner cut and the
+    # deviation at which the correction grows scale with the lane's width.
+    lane_scale = road.lane_width / LANE_WIDTH
+    line_limit = LINE_LIMIT + (road.lane_width - LANE_WIDTH) / 2.0
+    near_gain, tol = driver.near_gain, driver.lane_tolerance * lane_scale
+    edge = driver.edge_deviation * lane_scale
+    inv_edge = 1.0 / edge if edge > 0 else 0.0
     angle_gain = driver.vehicle_model_gain * vehicle.steering_angle_for_curvature(speed)
     feel = driver.feel_gain * vehicle.aligning_stiffness(speed)
     fb0, fb1 = 1.0 + g0, g1
@@ -133,9 +148,9 @@ def _simulate(
             f = x - i
             # the intended line (corner cut + wander) stays within LINE_LIMIT of the lane centre
             line = cut_near[i] + f * (cut_near[i + 1] - cut_near[i]) + wander[k]
-            lane = near[i] + f * (near[i + 1] - near[i]) + max(-LINE_LIMIT, min(LINE_LIMIT, line))
+            lane = near[i] + f * (near[i + 1] - near[i]) + max(-line_limit, min(line_limit, line))
             line = cut_far[i] + f * (cut_far[i + 1] - cut_far[i]) + wander[k]
-            aim = far[i] + f * (far[i + 1] - far[i]) + max(-LINE_LIMIT, min(LINE_LIMIT, line))
+            aim = far[i] + f * (far[i + 1] - far[i]) + max(-line_limit, min(line_limit, line))
 
             # visual layer, acting after the reaction delay; the lead acts on the far-point drift
             e_far = aim - e_y - look * e_psi
@@ -304,8 +319,10 @@ class Section:
             torque_source,
         )
 
-    def frame(self, features, torque, *, recording, driver, split, scale):
-        """The tidy frame of the measured ``features`` and ``torque``."""
+    def frame(self, log, features, torque, *, recording, driver, split, scale):
+        """The tidy frame of the measured ``features`` and ``torque``, with the manoeuvre
+        under way and its lane crossing, from the logged states ``log``."""
+        manoeuvre, crossing = self.manoeuvres(log)
         return tidy_frame(
             {
                 RECORDING: recording,
@@ -313,11 +330,36 @@ class Section:
                 SETTING: self.setting,
                 SPLIT: split,
                 TIME: np.arange(len(torque)) / self.sampling_rate,
+                MANOEUVRE: manoeuvre,
+                CROSSING_TIME: crossing,
                 **features,
                 TARGET: torque,
             },
-            attrs={"scenario": self.scenario, "speed": self.speed, "sensor_noise": scale},
+            attrs={
+                "scenario": self.scenario,
+                "speed": self.speed,
+                "sensor_noise": scale,
+                "lane_width": self.road.lane_width,
+            },
         )
+
+    def manoeuvres(self, log):
+        """The manoeuvre of every logged row (by the car's arc length) and, on the rows of a
+        manoeuvre, the time [s] its car's centre first crosses a marking of the centre lane
+        (NaN if it does not)."""
+        s, lateral = log[:, 10], log[:, 11]
+        labels = manoeuvre_of(self.road, s)
+        crossing = np.full(len(s), np.nan)
+        half = self.road.lane_width / 2.0
+        for start, stop, _ in self.road.manoeuvres:
+            rows = np.flatnonzero((s >= start) & (s < stop))
+            if rows.size < 2:
+                continue
+            side = np.sign(lateral[rows, None] - np.array([half, -half]))
+            changed = np.flatnonzero((side[1:] != side[:-1]).any(axis=1))
+            if changed.size:
+                crossing[rows] = rows[changed[0] + 1] / self.sampling_rate
+        return labels, crossing
 
 
 def _make_lane_keeping(
@@ -354,7 +396,7 @@ def _make_lane_keeping(
     if recording is None:
         recording = f"{style}-{scenario}-s{setting}"
     return section.frame(
-        features, torque, recording=recording, driver=style, split=split, scale=scale
+        log, features, torque, recording=recording, driver=style, split=split, scale=scale
     )
 
 
@@ -395,12 +437,16 @@ def make_lane_keeping(
         Constant forward speed [km/h] (the thesis drives at 100 km/h).
     sampling_rate : float, default=100.0
         Logging rate [Hz]. The model is integrated at a multiple of it, at least 200 Hz.
-    scenario : {"highway", "sharp_corners", "lane_change", "evasive"}, default="highway"
+    scenario : {"highway", "sharp_corners", "lane_change", "evasive", "wide_lane"}, \
+default="highway"
         "highway" is the thesis' protocol. Stress scenarios (thesis Appendix E.4):
         "sharp_corners" uses radii of 175-300 m (25 m grid) instead of the setting's;
         "lane_change" moves to a neighbouring lane and back every 300-800 m; "evasive" adds
-        sudden 2.5-3.5 m double lane changes over 30-40 m. The lateral deviation stays measured
-        from the centre lane.
+        sudden 2.5-3.5 m double lane changes over 30-40 m; "wide_lane" is one 5 m lane of
+        straights (300-800 m) alternating with sinusoidal segments (1-4 m amplitude, tightest
+        radius 300-600 m; the setting is not used), where the driver's tolerated band and
+        corner cut grow with the lane. The lateral deviation stays measured from the centre
+        lane.
     random_state : int, RandomState instance or None, default=None
         Seeds the road, the driver parameters and the remnant noise. Same int, same DataFrame.
     road_random_state : int, RandomState instance or None, default=None
@@ -422,11 +468,16 @@ def make_lane_keeping(
     Returns
     -------
     frame : pandas.DataFrame
-        One row per sample: ``recording, driver, setting, split, time`` then the 18 candidate
-        features :data:`FEATURE_NAMES` (Table B.2) then ``driver_torque``. SI units, listed in
-        ``frame.attrs["units"]``. Signs: y and yaw to the left; roll positive when the body
-        leans right (outwards in a left turn); deviations are vehicle minus road (lateral at the
-        front axle, heading at the road sensors at 0, 10 and 30 m ahead of the front axle);
+        One row per sample: ``recording, driver, setting, split, time``, ``manoeuvre`` (what
+        the driver is doing: ``"lane_keeping"``, ``"lane_change_left"``,
+        ``"lane_change_right"`` or ``"evasive"``, by the car's position on the road) and
+        ``crossing_time`` (on the rows of a manoeuvre, the time [s] at which the car's centre
+        crosses a marking of the centre lane; NaN elsewhere or if it never does), then the 18
+        candidate features :data:`FEATURE_NAMES` (Table B.2) then ``driver_torque``. SI units,
+        listed in ``frame.attrs["units"]``; ``frame.attrs["lane_width"]`` is the lane's width.
+        Signs: y and yaw to the left; roll positive when the body leans right (outwards in a
+        left turn); deviations are vehicle minus road (lateral at the front axle, heading at
+        the road sensors at 0, 10 and 30 m ahead of the front axle);
         curvature positive in left turns.
 
     Notes
@@ -477,7 +528,7 @@ def make_lane_keeping(
     >>> from skhmmgmr.datasets import make_lane_keeping
     >>> frame = make_lane_keeping(duration=10.0, driver="aggressive", random_state=0)
     >>> frame.shape
-    (1000, 24)
+    (1000, 26)
     >>> frame.attrs["units"]["driver_torque"]
     'Nm'
     """

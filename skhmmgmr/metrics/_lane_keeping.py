@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from .._core._panel import read_layout
-from .._core._schema import RECORDING, TARGET, TIME
+from .._core._schema import MANOEUVRE, RECORDING, TARGET, TIME
 
 LANE_KEEPING_METRICS = (
     "lateral_deviation_rms",
@@ -43,7 +43,7 @@ LANE_KEEPING_METRICS = (
     "steering_reversal_rate",
 )
 _COLUMNS = ("lateral_deviation_0m", "heading_deviation_0m", "steering_wheel_angle", TARGET)
-MANOEUVRE = "manoeuvre"
+DEFAULT_LANE_WIDTH = 3.5
 
 
 def _positive(value, name):
@@ -55,7 +55,7 @@ def _positive(value, name):
 def lane_keeping_metrics(
     frame,
     *,
-    lane_width=3.5,
+    lane_width=None,
     vehicle_width=1.8,
     hysteresis=0.1,
     reversal_gap=math.radians(2.0),
@@ -69,8 +69,9 @@ def lane_keeping_metrics(
         panel with them in its index), with ``lateral_deviation_0m``,
         ``heading_deviation_0m``, ``steering_wheel_angle`` and ``driver_torque``; optionally
         ``manoeuvre``.
-    lane_width : float, default=3.5
-        Width of the lane [m].
+    lane_width : float, default=None
+        Width of the lane [m]; by default ``frame.attrs["lane_width"]`` (the simulator's
+        frames say it: 5 m in the ``"wide_lane"`` scenario), else 3.5.
     vehicle_width : float, default=1.8
         Width of the car [m]; a wheel leaves the lane when the lateral deviation exceeds
         ``(lane_width - vehicle_width) / 2``.
@@ -99,6 +100,8 @@ def lane_keeping_metrics(
     """
     if not isinstance(frame, pd.DataFrame):
         raise TypeError(f"frame must be a pandas DataFrame, got {type(frame).__name__}.")
+    if lane_width is None:
+        lane_width = frame.attrs.get("lane_width", DEFAULT_LANE_WIDTH)
     lane_width = _positive(lane_width, "lane_width")
     vehicle_width = _positive(vehicle_width, "vehicle_width")
     reversal_gap = _positive(reversal_gap, "reversal_gap")
