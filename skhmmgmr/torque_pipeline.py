@@ -494,11 +494,11 @@ class TorquePipeline(Pipeline):
     """The :class:`~sklearn.pipeline.Pipeline` of :func:`make_torque_pipeline`: recordings
     given once reach every step that reads them.
 
-    ``fit``, ``predict``, ``score`` and ``transform`` take ``groups`` (the recording id of
-    every row) and hand it to every step whose method takes it, with scikit-learn's metadata
-    routing on or off; with routing off, a scikit-learn ``Pipeline`` passes ``groups`` only to
-    the steps named in ``<step>__groups`` at fit and to no transformer at predict, so a
-    velocity filter would run across recordings. A ``<step>__groups`` that leaves out a step
+    ``fit``, ``predict`` and ``score`` take ``groups`` (the recording id of every row), read
+    the recordings once, and hand them to every step whose method takes them, with
+    scikit-learn's metadata routing on or off; with routing off, a scikit-learn ``Pipeline``
+    passes ``groups`` only to the steps named in ``<step>__groups`` at fit and to no
+    transformer at predict, so a velocity filter would run across recordings. A ``<step>__groups`` that leaves out a step
     whose output depends on the recordings is refused, naming the step. Recordings in the
     index of a panel (:func:`skhmmgmr.datasets.to_panel`) reach every step as they are.
 
