@@ -498,8 +498,9 @@ class TorquePipeline(Pipeline):
     the recordings once, and hand them to every step whose method takes them, with
     scikit-learn's metadata routing on or off; with routing off, a scikit-learn ``Pipeline``
     passes ``groups`` only to the steps named in ``<step>__groups`` at fit and to no
-    transformer at predict, so a velocity filter would run across recordings. A ``<step>__groups`` that leaves out a step
-    whose output depends on the recordings is refused, naming the step. Recordings in the
+    transformer at predict, so a velocity filter would run across recordings. A
+    ``<step>__groups`` that leaves out a step whose output depends on the recordings is
+    refused, naming the step. Recordings in the
     index of a panel (:func:`skhmmgmr.datasets.to_panel`) reach every step as they are.
 
     The regressor's own methods are the pipeline's, with the regressor's signatures and the
