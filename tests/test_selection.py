@@ -249,3 +249,25 @@ def test_relevance_sources_are_checked(protocol):
             progress=False,
             relevance_sources={"a": RelevanceSource(ForwardFeatureSelector(), features="some")},
         )
+
+
+def test_screening_tolerance_applies_to_the_wrappers_only(protocol, report):
+    screened = select_parameters(protocol, k_max=3, screening_tol=0.05, progress=False)
+    for name in ("exhaustive", "forward"):
+        assert screened.sources[name].estimator.tol == 0.05
+        assert report.sources[name].estimator.tol == 1e-4
+    assert screened.final_model.tol == screened.baseline_model.tol == 1e-4
+    # the wrappers' models are those of a selector run with the loose tolerance itself
+    search = protocol[protocol["split"] != "test"]
+    cv = PredefinedSplit(np.where(search["split"] == "validation", 0, -1))
+    loose = ExhaustiveFeatureSelector(
+        screened.sources["exhaustive"].estimator, cv=cv, sampling_period=PERIOD
+    ).fit(search[["f0", "f1", "f2", "f3"]], search["driver_torque"], search["recording"])
+    pd.testing.assert_frame_equal(screened.exhaustive, loose.results_)
+    # the state sweep keeps the strict tolerance: same subset, same state scores
+    assert screened.features == report.features
+    pd.testing.assert_frame_equal(screened.states, report.states)
+    assert not screened.exhaustive["accuracy"].equals(report.exhaustive["accuracy"])
+    for bad in (0, -1e-3, float("nan"), float("inf"), True, "1e-3"):
+        with pytest.raises(ValueError, match="screening_tol"):
+            select_parameters(protocol, k_max=2, screening_tol=bad, progress=False)
