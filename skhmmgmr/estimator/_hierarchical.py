@@ -70,8 +70,9 @@ class HierarchicalHMMGMRRegressor(HMMGMRRegressor):
     n_iter : int, default=100
         Maximum EM iterations of every manoeuvre's fit, and of the joint EM without labels.
     refine_iter : int, default=10
-        Maximum EM iterations of the joint refinement after a fit with labels (0: keep the
-        parameters read from the labels).
+        EM iterations of the joint refinement after a fit with labels, at most (0: keep the
+        parameters read from the labels). A budget: stopping before convergence is not
+        warned about.
     tol : float, default=1e-4
         Convergence threshold on the gain in log-likelihood per row.
     n_init : int, default=1
@@ -276,11 +277,11 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
         standardized, scaling, stale_noise = self._standardized(inputs, hierarchy.n_states)
         recordings = inputs.recordings
         result = self._fit_hierarchy(standardized, recordings, codes, hierarchy)
-        if not result.converged and (codes is None or self.refine_iter > 0):
+        # with labels, refine_iter is a budget of refinement, not a fit to convergence
+        if not result.converged and codes is None:
             warnings.warn(
-                f"the joint EM did not converge in "
-                f"{self.n_iter if codes is None else self.refine_iter} iterations "
-                f"(tol={self.tol}); increase n_iter (refine_iter with labels) or tol.",
+                f"the joint EM did not converge in n_iter={self.n_iter} iterations "
+                f"(tol={self.tol}); increase n_iter or tol.",
                 ConvergenceWarning,
                 stacklevel=2,
             )
