@@ -14,7 +14,7 @@ from . import (
 from ._core._public import publish
 from ._hmm._fitted import FittedHMMGMR, Standardization
 from ._version import __version__
-from .estimator import HMMGMRRegressor
+from .estimator import HierarchicalHMMGMRRegressor, HMMGMRRegressor
 from .feature_selection import (
     ExhaustiveFeatureSelector,
     ForwardFeatureSelector,
@@ -34,6 +34,7 @@ __all__ = [
     "FittedHMMGMR",
     "ForwardFeatureSelector",
     "HMMGMRRegressor",
+    "HierarchicalHMMGMRRegressor",
     "PerformanceScore",
     "SelectionReport",
     "SmoothnessScore",

@@ -21,6 +21,7 @@ import skhmmgmr
 from skhmmgmr import (
     ExhaustiveFeatureSelector,
     ForwardFeatureSelector,
+    HierarchicalHMMGMRRegressor,
     HMMGMRRegressor,
     SpearmanSelector,
     StateSelector,
@@ -40,6 +41,9 @@ ESTIMATORS = [
     # NaN inputs marginalised: allow_nan, so the checks also fit and predict with NaN
     HMMGMRRegressor(n_states=2, missing_values="marginalize", random_state=0),
     HMMGMRRegressor(n_states=2, missing_values="carry_forward", random_state=0),
+    # two manoeuvres of one state each, found by k-means (the checks pass no labels)
+    HierarchicalHMMGMRRegressor(n_states=1, random_state=0),
+    HierarchicalHMMGMRRegressor(n_states=1, missing_values="marginalize", random_state=0),
     SpearmanSelector(k=1),
     ExhaustiveFeatureSelector(max_features=1, **SEARCH),
     ForwardFeatureSelector(max_features=1, **SEARCH),
@@ -102,6 +106,7 @@ def _check_name(check):
         *ESTIMATORS,
         *CANNOT_RUN,
         HMMGMRRegressor(n_states=1),
+        HierarchicalHMMGMRRegressor(manoeuvres=1, n_states=1),
         StateSelector(k_max=1, **SEARCH),
         StateSelector(sampling_period=PERIOD),
         ExhaustiveFeatureSelector(),

@@ -11,6 +11,7 @@ from skhmmgmr._core._docstrings import SHARED_GROUPS, SHARED_PARAMETERS, fill_sh
 # A parameter that only shares its name with a shared one, and what it means there instead.
 SAME_NAME_OTHER_MEANING = {
     ("HMMGMRRegressor", "verbose"): "prints the log-likelihood of every EM iteration",
+    ("HierarchicalHMMGMRRegressor", "verbose"): "prints the joint EM log-likelihoods",
     ("compare_subsets", "groups"): "required: the comparison validates whole recordings",
     ("select_parameters", "estimator"): "a template whose features and n_states it selects",
 }

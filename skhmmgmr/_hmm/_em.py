@@ -281,14 +281,24 @@ def _score(engine, params):
         return float(sum(item[-1] for item in _forward_blocks(engine, params)))
 
 
-def m_step(stats, previous, prior):
+def m_step(stats, previous, prior, transitions=None):
     """Maximisation step of the penalised log-likelihood.
 
     The emission's M-step (with its ``prior``, see
     :meth:`~skhmmgmr._hmm._emissions.GaussianEmissions.maximize`); a transition row with no
     expected transitions keeps its previous values. Both keep the objective non-decreasing
     (a generalised EM step). Probabilities are floored at :data:`PROBABILITY_FLOOR`.
+    ``transitions``, when given, replaces the M-step of the start and transition
+    probabilities: an object whose ``maximize(start_counts, transition_counts, previous)``
+    returns ``(startprob, transmat)`` (a structured transition matrix, as the manoeuvre
+    hierarchy of :mod:`skhmmgmr._hmm._hierarchy`).
     """
+    emissions = previous.emissions.maximize(stats.emission, prior)
+    if transitions is not None:
+        startprob, transmat = transitions.maximize(
+            stats.start_counts, stats.transition_counts, previous
+        )
+        return HMMParameters(startprob, transmat, emissions)
     startprob = _floored(stats.start_counts / stats.start_counts.sum())
     row_sums = stats.transition_counts.sum(axis=1, keepdims=True)
     transmat = np.where(
@@ -297,7 +307,7 @@ def m_step(stats, previous, prior):
         previous.transmat,
     )
     transmat = _floored(transmat)
-    return HMMParameters(startprob, transmat, previous.emissions.maximize(stats.emission, prior))
+    return HMMParameters(startprob, transmat, emissions)
 
 
 # A start or transition probability that the expected counts make exactly zero is raised to
@@ -336,11 +346,23 @@ def initialize_parameters(
     return HMMParameters(startprob, transmat, emissions)
 
 
-def baum_welch(X, recordings, params, *, n_iter, tol, reg_covar, callback=None, engine=None):
+def baum_welch(
+    X,
+    recordings,
+    params,
+    *,
+    n_iter,
+    tol,
+    reg_covar,
+    callback=None,
+    engine=None,
+    transitions=None,
+):
     """Run EM from ``params`` until the per-row gain of the objective is below ``tol``.
 
     The objective is the penalised log-likelihood (see :class:`EMResult`); ``callback``, when
-    given, is called as ``callback(iteration, log_likelihood, objective)``.
+    given, is called as ``callback(iteration, log_likelihood, objective)``; ``transitions``
+    is passed to :func:`m_step`.
     """
     if engine is None:
         engine = EStepData(X, recordings, params.n_states)
@@ -369,7 +391,7 @@ def baum_welch(X, recordings, params, *, n_iter, tol, reg_covar, callback=None, 
             callback(n_done, log_likelihood, objectives[-1])
         if converged:
             break
-        params = m_step(stats, params, prior)
+        params = m_step(stats, params, prior, transitions)
     else:
         history.append(_score(engine, params))
         objectives.append(objective_of(history[-1], params))
@@ -397,11 +419,13 @@ def fit_hmm(
     random_state=None,
     initial_parameters=None,
     covariance_type="full",
+    transitions=None,
 ):
     """Fit a Gaussian HMM with ``n_init`` restarts and return the best :class:`EMResult`.
 
     The best run is the one with the highest objective (the penalised log-likelihood that EM
-    maximises). ``X`` is an array of shape (n_samples, n_features) or :class:`Columns`. When
+    maximises). ``X`` is an array of shape (n_samples, n_features) or :class:`Columns`.
+    ``transitions`` (see :func:`m_step`) keeps the transition matrix structured. When
     ``converged`` is reached the last E-step already scored the returned parameters (they
     were not updated after it); otherwise the returned parameters are scored once more.
     """
@@ -431,6 +455,7 @@ def fit_hmm(
                 tol=tol,
                 reg_covar=reg_covar,
                 engine=engine,
+                transitions=transitions,
             )
         except NotPositiveDefiniteError as exc:
             raise em_failure(exc, reg_covar) from exc

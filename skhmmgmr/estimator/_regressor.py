@@ -240,18 +240,8 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         # initialization reads the rows in order, so neither a shuffle of a panel's rows (a
         # resampling search) nor the order of the recordings given as arrays may change it.
         inputs = read_joint_inputs(self, X, y, groups, time, fitting=True)
-        X, Y, recordings = inputs.X, inputs.Y, inputs.recordings
-        names, output_names = inputs.input_names, inputs.output_names
-        self.n_outputs_ = Y.shape[1]
-        # Without recordings there is nothing to compare a later prediction's length with.
-        self.longest_recording_ = int(recordings.lengths.max()) if inputs.grouped else None
-        check_enough_rows(X.shape[0], self.n_states, X.shape[1] + Y.shape[1])
-        # The engine's own layout, standardised in place: the only copy of the data it makes.
-        standardized, center, scale = Columns.standardized(X, Y)
-        check_column_scales(scale, [*names, *output_names])
-        # The variograms need the missing values, which the engine overwrites.
-        stale_noise = learn_stale_noise(self.missing_values, standardized, X.shape[1], recordings)
-        result = self._baum_welch(standardized, recordings)
+        standardized, scaling, stale_noise = self._standardized(inputs, self.n_states)
+        result = self._baum_welch(standardized, inputs.recordings)
         if not result.converged:
             warnings.warn(
                 f"EM did not converge in n_iter={self.n_iter} iterations (tol={self.tol}); "
@@ -259,17 +249,40 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
                 ConvergenceWarning,
                 stacklevel=2,
             )
+        self._set_fitted(result, inputs, scaling, stale_noise)
+        return self
+
+    def _standardized(self, inputs, n_states):
+        """``(columns, (center, scale), stale_noise)`` of the joint ``inputs`` of a fit of
+        ``n_states`` states, with the attributes read from the data (``n_outputs_``,
+        ``longest_recording_``)."""
+        X, Y, recordings = inputs.X, inputs.Y, inputs.recordings
+        self.n_outputs_ = Y.shape[1]
+        # Without recordings there is nothing to compare a later prediction's length with.
+        self.longest_recording_ = int(recordings.lengths.max()) if inputs.grouped else None
+        check_enough_rows(X.shape[0], n_states, X.shape[1] + Y.shape[1])
+        # The engine's own layout, standardised in place: the only copy of the data it makes.
+        standardized, center, scale = Columns.standardized(X, Y)
+        check_column_scales(scale, [*inputs.input_names, *inputs.output_names])
+        # The variograms need the missing values, which the engine overwrites.
+        stale_noise = learn_stale_noise(self.missing_values, standardized, X.shape[1], recordings)
+        return standardized, (center, scale), stale_noise
+
+    def _set_fitted(self, result, inputs, scaling, stale_noise):
+        """The fitted attributes from the EM ``result`` on the standardised columns of
+        ``inputs`` (``scaling``: their centre and scale)."""
+        center, scale = scaling
         params = result.parameters
         self.model_ = FittedHMMGMR.from_standardized(
             params.startprob,
             params.transmat,
             params.emissions,
-            Standardization(center, scale, X.shape[1]),
+            Standardization(center, scale, inputs.X.shape[1]),
             scalar_output=inputs.scalar_output,
             feature_names=getattr(self, "feature_names_in_", None),
             stale_noise=stale_noise,
         )
-        jacobian = self.model_.standardization.log_jacobian(observed_counts(X, Y))
+        jacobian = self.model_.standardization.log_jacobian(observed_counts(inputs.X, inputs.Y))
         self.n_iter_ = result.n_iter
         self.converged_ = result.converged
         self.log_likelihood_ = result.log_likelihood + jacobian
@@ -288,7 +301,6 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
                     f"EM iteration {i}: log-likelihood {value:.6f}, "
                     f"penalised log-likelihood {objective:.6f}"
                 )
-        return self
 
     def _baum_welch(self, columns, recordings):
         # The one place the EM engine is called (a reference engine can stand in for it).
