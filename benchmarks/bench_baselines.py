@@ -26,6 +26,12 @@ boosting baseline. Run with::
     python benchmarks/bench_baselines.py --seeds 0 --rates 20  # one table, about 2 minutes
     python benchmarks/bench_baselines.py --quick               # 1-minute recordings
 
+``--vehicles default 0 1 2`` runs the whole bench in every car given (``default``: the
+simulator's reference car; an int: the car ``draw_vehicle`` draws from it, the steering
+system drawn within ``VEHICLE_RANGES``) and ends with the spread over the cars: per rate and
+model, the mean accuracy and roughness in each car (over the seeds), their lowest and highest,
+and the pipeline's margin over boosting in each car.
+
 ``--output results.json`` saves every per-recording figure. ``--residuals`` prints instead
 why the thesis' model loses: the mean test residual of ``HMMGMRRegressor`` (K=5, 18 features)
 and of the pipeline (K=5) in bins of lateral acceleration and of steering-wheel velocity, and
@@ -45,7 +51,12 @@ from sklearn.ensemble import HistGradientBoostingRegressor
 from sklearn.linear_model import RidgeCV
 
 from skhmmgmr import HMMGMRRegressor, make_torque_pipeline
-from skhmmgmr.datasets import FEATURE_NAMES, make_driving_protocol
+from skhmmgmr.datasets import (
+    FEATURE_NAMES,
+    VehicleParameters,
+    draw_vehicle,
+    make_driving_protocol,
+)
 from skhmmgmr.metrics import normalize_performance
 from skhmmgmr.metrics._table import recording_metrics
 
@@ -140,13 +151,13 @@ def choose_pipeline(data, rate, states):
     return k, max(by_filter, key=by_filter.get), by_states, by_filter
 
 
-def run(seed, rate, states, duration, cache):
+def run(seed, rate, states, duration, cache, vehicle=None):
     data = make_driving_protocol(
-        random_state=seed, sampling_rate=rate, duration=duration, cache=cache
+        random_state=seed, sampling_rate=rate, duration=duration, cache=cache, vehicle=vehicle
     )
     k, velocity_filter, by_states, by_filter = choose_pipeline(data, rate, states)
     print(
-        f"\nseed {seed}, {rate:g} Hz: pipeline validation accuracy "
+        f"\nseed {seed}, {rate:g} Hz, car {car_name(vehicle)}: pipeline validation accuracy "
         + ", ".join(f"K={s}: {a:.2f}" for s, a in by_states.items())
         + f" -> K={k}; velocity filter "
         + ", ".join(f"{f}: {a:.2f}" for f, a in by_filter.items())
@@ -184,7 +195,7 @@ def run(seed, rate, states, duration, cache):
     table = pd.concat(tables, ignore_index=True)
     ps = normalize_performance(table, weights="50/50")
     table = table.merge(ps[["model", "recording", "performance_score"]], on=["model", "recording"])
-    table["seed"], table["rate"] = seed, rate
+    table["seed"], table["rate"], table["vehicle"] = seed, rate, car_name(vehicle)
     summary = summarise(table, pd.DataFrame(costs))
     print(summary.to_string(float_format=lambda v: f"{v:.2f}"))
     return table, summary
@@ -239,6 +250,51 @@ def targets(summary):
     return checks
 
 
+def spread(table):
+    """Per rate and model, the mean accuracy and roughness in every car, and their range."""
+    for rate, rows in table.groupby("rate"):
+        by_car = rows.groupby(["model", "vehicle"], sort=False)[["accuracy", "smoothness"]]
+        means = by_car.mean().unstack("vehicle")
+        accuracy, roughness = means["accuracy"], means["smoothness"]
+        summary = pd.DataFrame(
+            {
+                "acc min %": accuracy.min(axis=1),
+                "acc max %": accuracy.max(axis=1),
+                "rough min": roughness.min(axis=1),
+                "rough max": roughness.max(axis=1),
+            }
+        )
+        worst = rows.groupby(["model", "vehicle"], sort=False)["accuracy"].min().unstack()
+        summary["worst recording %"] = worst.min(axis=1)
+        print(f"\n{rate:g} Hz: mean test accuracy % per car (over the seeds)")
+        print(accuracy.to_string(float_format=lambda v: f"{v:.2f}"))
+        print(f"\n{rate:g} Hz: spread over the cars")
+        print(summary.to_string(float_format=lambda v: f"{v:.2f}"))
+        pipeline = next(m for m in accuracy.index if m.startswith(PIPELINE))
+        margin = accuracy.loc[pipeline] - accuracy.loc["HistGradientBoosting"]
+        print(
+            f"{rate:g} Hz: pipeline minus boosting per car (points): "
+            + ", ".join(f"{car}: {m:+.2f}" for car, m in margin.items())
+        )
+
+
+def car_name(vehicle):
+    return "default" if vehicle is None else str(vehicle)
+
+
+def describe_cars(vehicles):
+    for vehicle in vehicles:
+        car = draw_vehicle(vehicle) if vehicle is not None else VehicleParameters()
+        print(
+            f"car {car_name(vehicle)}: friction {car.wheel_friction:.2f} Nm over "
+            f"{car.friction_velocity:.2f} rad/s, assist {car.assist_gain:.2f} + "
+            f"{car.assist_gain_slope:.2f}/Nm (max {car.assist_max:.1f} Nm), damping "
+            f"{car.wheel_damping:.2f} Nms/rad, inertia {car.wheel_inertia:.3f} kg m^2, ratio "
+            f"{car.steering_ratio:.1f}, trails {car.mechanical_trail * 1e3:.0f}+"
+            f"{car.pneumatic_trail * 1e3:.0f} mm, sensor noise x{car.sensor_noise:.2f}"
+        )
+
+
 def residuals(seed, rate, duration, cache):
     """Mean test residual per bin of the two inputs whose nonlinearity the states miss."""
     data = make_driving_protocol(
@@ -287,20 +343,33 @@ def main():
     parser.add_argument("--cache", default=None, help="folder caching the simulated data")
     parser.add_argument("--output", default=None, help="JSON file of every figure")
     parser.add_argument("--residuals", action="store_true", help="the residual analysis only")
+    parser.add_argument(
+        "--vehicles",
+        nargs="+",
+        default=["default"],
+        help="cars: 'default' (the reference car) or int seeds of draw_vehicle",
+    )
     args = parser.parse_args()
     warnings.filterwarnings("ignore", category=UserWarning)
     duration = 60.0 if args.quick else 300.0
     if args.residuals:
         residuals(args.seeds[0], args.rates[0], duration, args.cache)
         return
+    vehicles = [None if v == "default" else int(v) for v in args.vehicles]
+    describe_cars(vehicles)
     tables, missed = [], 0
-    for rate in args.rates:
-        for seed in args.seeds:
-            table, summary = run(seed, rate, args.states, duration, args.cache)
-            tables.append(table)
-            for what, ok, ours, boost in targets(summary):
-                missed += not ok
-                print(f"  [{'ok' if ok else 'MISSED'}] {what}: {ours:.2f} vs boosting {boost:.2f}")
+    for vehicle in vehicles:
+        for rate in args.rates:
+            for seed in args.seeds:
+                table, summary = run(seed, rate, args.states, duration, args.cache, vehicle)
+                tables.append(table)
+                for what, ok, ours, boost in targets(summary):
+                    missed += not ok
+                    print(
+                        f"  [{'ok' if ok else 'MISSED'}] {what}: {ours:.2f} vs boosting {boost:.2f}"
+                    )
+    if len(vehicles) > 1:
+        spread(pd.concat(tables, ignore_index=True))
     if args.output:
         with open(args.output, "w") as file:
             json.dump(pd.concat(tables).to_dict(orient="records"), file)

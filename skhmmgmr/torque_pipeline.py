@@ -714,7 +714,7 @@ class TorquePipeline(Pipeline):
         )
 
     @available_if(_final_step_has("adapt"))
-    def adapt(self, X, y, groups=None, *, relevance=16.0, parameters="m", n_iter=10, time=None):
+    def adapt(self, X, y, groups=None, *, relevance=256.0, parameters="mv", n_iter=10, time=None):
         """Adapt the fitted regressor to new recordings (MAP EM); the transformers stay.
 
         ``X`` goes through the transformers first, ``groups`` handed to every step that
@@ -728,9 +728,9 @@ class TorquePipeline(Pipeline):
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
         groups : array-like of shape (n_samples,), default=None
             Recording id of every row.
-        relevance : float, default=16.0
+        relevance : float, default=256.0
             Relevance factor ``r`` > 0: rows of evidence at which a state moves halfway.
-        parameters : str, default="m"
+        parameters : str, default="mv"
             Which parameters adapt: any of "m" (means), "v" (covariances), "t" (transitions).
         n_iter : int, default=10
             Maximum number of MAP EM iterations.

@@ -290,3 +290,14 @@ def test_score_names_a_missing_target():
     y.iloc[17] = np.nan
     with pytest.raises(ValueError, match=r"Input y contains NaN in column 'torque'.*row 17"):
         model.score(X, y)
+
+
+def test_the_defaults_adapt_means_and_covariances_with_relevance_256(fitted):
+    """#37: the defaults chosen by benchmarks/bench_adapt_defaults.py."""
+    X, y = _data(300, 5, offset=0.5)
+    default = _copy(fitted).adapt(X, y, n_iter=3)
+    explicit = _copy(fitted).adapt(X, y, relevance=256.0, parameters="mv", n_iter=3)
+    assert np.array_equal(default.means_, explicit.means_)
+    assert np.array_equal(default.covars_, explicit.covars_)
+    assert np.array_equal(default.transmat_, fitted.transmat_)  # transitions stay
+    assert not np.allclose(default.covars_, fitted.covars_)

@@ -26,14 +26,18 @@ from ._recordings import load_recordings
 from ._resample import resample_recordings
 from ._shift import shift_target
 from ._simulator import make_lane_keeping
+from ._vehicle import VEHICLE_RANGES, VehicleParameters, draw_vehicle
 
 __all__ = [
     "CALIBRATION_BANDS",
     "DRIVER_STYLES",
     "DriverParameters",
     "THESIS_TABLE_C2",
+    "VEHICLE_RANGES",
+    "VehicleParameters",
     "calibration_table",
     "drive",
+    "draw_vehicle",
     "make_driving_protocol",
     "make_lane_keeping",
     "COMMA2K19_URL",

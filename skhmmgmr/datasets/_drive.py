@@ -19,6 +19,7 @@ from ._simulator import (
     _features,
     make_lane_keeping,
 )
+from ._vehicle import check_vehicle
 
 # The human whose parameters a model run draws (and does not use): every style draws as many
 # numbers, so the road, the manoeuvres and the sensor errors are those of any human's run.
@@ -38,6 +39,7 @@ def drive(
     sensor_noise="typical",
     recording=None,
     split="test",
+    vehicle=None,
 ):
     """Put a driver at the wheel of the simulator and record the drive.
 
@@ -73,6 +75,9 @@ def drive(
         or the callable's name for a model).
     split : str, default="test"
         Value of the ``split`` column.
+    vehicle : None, "default", int, dict or VehicleParameters, default=None
+        The car, see :func:`make_lane_keeping`. The same seeds in another car give the same
+        road, manoeuvres and sensor errors (scaled by the car's ``sensor_noise``).
 
     Returns
     -------
@@ -123,7 +128,8 @@ def drive(
     speed_kmh = _check_positive(speed_kmh, "speed_kmh")
     setting = _check_setting(setting)
     scenario = _check_scenario(scenario)
-    scale = check_sensor_noise(sensor_noise)
+    check_sensor_noise(sensor_noise)
+    vehicle = check_vehicle(vehicle)
     if isinstance(driver, str):
         if driver not in DRIVER_STYLES:
             raise ValueError(
@@ -142,6 +148,7 @@ def drive(
             recording=recording,
             split=split,
             sensor_noise=sensor_noise,
+            vehicle=vehicle,
         )
     name, torque_of = _torque_function(driver)
     section = Section(
@@ -153,10 +160,12 @@ def drive(
         scenario,
         random_state,
         road_random_state,
+        vehicle,
     )
     if section.n_samples < 1:
         raise ValueError(f"duration={duration} s holds no sample at sampling_rate={sampling_rate}.")
     dt = 1.0 / sampling_rate
+    scale = section.sensor_scale(sensor_noise)
     errors = None if scale is None else draw_errors(section.n_samples, dt, scale, section.rng)
     sensors = SensorStream(FEATURE_NAMES, errors, dt, section.speed, scale)
     sensed = np.empty((section.n_samples, len(FEATURE_NAMES)))

@@ -1,6 +1,7 @@
 """The data protocol of the thesis (Appendix B.4): training, validation and test sections."""
 
 import numbers
+from dataclasses import asdict
 
 import numpy as np
 from joblib import Parallel, delayed
@@ -10,6 +11,7 @@ from ._driver import DRIVER_STYLES
 from ._frame import concat_frames
 from ._sensors import check_sensor_noise
 from ._simulator import make_lane_keeping
+from ._vehicle import check_vehicle
 
 TRAIN_SETTINGS = (1, 2, 3, 4, 5, 6)
 EVALUATION_SETTING = 7
@@ -43,6 +45,7 @@ def make_driving_protocol(
     scenario="highway",
     random_state=None,
     sensor_noise="typical",
+    vehicle=None,
     n_jobs=None,
     cache=None,
 ):
@@ -75,6 +78,11 @@ def make_driving_protocol(
         Seeds the roads and the recordings.
     sensor_noise : {"typical", "none"}, float or None, default="typical"
         Sensor errors of every recording, see :func:`make_lane_keeping` (Sensors).
+    vehicle : None, "default", int, dict or VehicleParameters, default=None
+        The car every recording is driven in, see :func:`make_lane_keeping`: None is the
+        reference car, an int the car :func:`draw_vehicle` draws from it. The car is drawn
+        apart from ``random_state``: the same seed gives the same roads and drivers in every
+        car.
     n_jobs : int, default=None
         Recordings simulated in parallel (joblib); None means 1.
     cache : str, path or joblib.Memory, default=None
@@ -107,7 +115,8 @@ def make_driving_protocol(
                 f"Unknown driver style {driver!r} in drivers; expected keys of DRIVER_STYLES "
                 f"{sorted(DRIVER_STYLES)}."
             )
-    check_sensor_noise(sensor_noise)
+    scale = check_sensor_noise(sensor_noise)
+    vehicle = check_vehicle(vehicle)
     if len(set(drivers)) != len(drivers):
         raise ValueError(f"drivers must not repeat a style, got drivers={drivers!r}.")
     sections = _sections(
@@ -138,6 +147,7 @@ def make_driving_protocol(
                 recording=f"{driver}-{split}-s{setting}-{i}",
                 split=split,
                 sensor_noise=sensor_noise,
+                vehicle=vehicle,
                 cache=cache,
             )
             jobs.append(delayed(make_lane_keeping)(**kwargs))
@@ -146,6 +156,7 @@ def make_driving_protocol(
         attrs={
             "scenario": scenario,
             "speed": speed_kmh / 3.6,
-            "sensor_noise": check_sensor_noise(sensor_noise),
+            "sensor_noise": (None if scale is None else scale * vehicle.sensor_noise),
+            "vehicle": asdict(vehicle),
         },
     )

@@ -3,6 +3,7 @@
 import math
 import numbers
 import os
+from dataclasses import asdict
 
 import numpy as np
 from sklearn.utils import check_random_state
@@ -22,7 +23,7 @@ from ._driver import check_driver, coloured_noise, sample_driver
 from ._frame import tidy_frame
 from ._road import LANE_WIDTH, SETTINGS, make_road, manoeuvre_of, manoeuvre_offsets
 from ._sensors import check_sensor_noise, measure
-from ._vehicle import VehicleParameters
+from ._vehicle import check_vehicle
 
 SCENARIOS = ("highway", "sharp_corners", "lane_change", "evasive", "wide_lane")
 INTERNAL_RATE = 200.0  # [Hz] minimum integration rate
@@ -30,6 +31,7 @@ PREVIEW_DISTANCES = (10.0, 30.0)  # [m] road sensors ahead of the front axle
 LOST_CONTROL = 10.0  # [m] lateral deviation at which the simulation stops
 CORNER_CUT_RADIUS = 300.0  # [m] radius at which the corner cut is corner_cutting * tolerance
 LINE_LIMIT = 0.8  # [m] largest intended offset from the centre of a 3.5 m lane (car 1.8 m wide)
+STIFF_STEP = 0.5  # dt * (velocity slope) / inertia of the steering above which it steps implicitly
 
 
 def _check_positive(value, name):
@@ -100,6 +102,10 @@ def _simulate(
     if torque_source is not None:
         j_arm = b_arm = 0.0
     j_sw = vehicle.wheel_inertia
+    # explicit Euler on the steering's velocity terms is stable for dt * slope / inertia < 2;
+    # a car past STIFF_STEP (stiff damping, narrow friction band, light wheel) steps them
+    # implicitly (the reference car, at 0.41 for 200 Hz, does not)
+    stiff = dt * (b_sw + fric / fric_v) / j_sw > STIFF_STEP
     act_lag = dt / (driver.activation_time + dt)
     look = speed * driver.preview_time
     far_gain = 2.0 / (look * look)
@@ -204,8 +210,15 @@ def _simulate(
         if gain * abs(t_driver) > a_max:
             gain = a_max / abs(t_driver)
         t_arm = t_hand - b_arm * theta_d
-        loads = force_f * trail / ratio + b_sw * theta_d + fric * tanh(theta_d / fric_v)
-        theta_dd = ((1.0 + gain) * t_arm - loads) / (j_sw + (1.0 + gain) * j_arm)
+        sticking = tanh(theta_d / fric_v)
+        loads = force_f * trail / ratio + b_sw * theta_d + fric * sticking
+        if stiff:
+            # linearised backward Euler on the velocity terms (damping, friction): stable
+            # whatever the friction's slope fric / fric_v against the inertia
+            slope = b_sw + (1.0 + gain) * b_arm + fric / fric_v * (1.0 - sticking * sticking)
+            theta_dd = ((1.0 + gain) * t_arm - loads) / (j_sw + (1.0 + gain) * j_arm + dt * slope)
+        else:
+            theta_dd = ((1.0 + gain) * t_arm - loads) / (j_sw + (1.0 + gain) * j_arm)
         t_driver = t_arm - j_arm * theta_dd
 
         if torque_source is None and sample:
@@ -285,12 +298,13 @@ class Section:
         scenario,
         random_state,
         road_random_state,
+        vehicle=None,
     ):
         rng = check_random_state(random_state)
         road_rng = rng if road_random_state is None else check_random_state(road_random_state)
         self.rng = rng
         self.parameters = sample_driver(check_driver(driver), rng)
-        self.vehicle = VehicleParameters()
+        self.vehicle = check_vehicle(vehicle)
         self.speed = speed_kmh / 3.6
         self.sampling_rate, self.setting, self.scenario = sampling_rate, setting, scenario
         self.n_samples = int(round(duration * sampling_rate))
@@ -319,6 +333,11 @@ class Section:
             torque_source,
         )
 
+    def sensor_scale(self, sensor_noise):
+        """Scale of the sensor errors: ``sensor_noise``'s times the car's (None: clean)."""
+        scale = check_sensor_noise(sensor_noise)
+        return None if scale is None else scale * self.vehicle.sensor_noise
+
     def frame(self, log, features, torque, *, recording, driver, split, scale):
         """The tidy frame of the measured ``features`` and ``torque``, with the manoeuvre
         under way and its lane crossing, from the logged states ``log``."""
@@ -340,6 +359,7 @@ class Section:
                 "speed": self.speed,
                 "sensor_noise": scale,
                 "lane_width": self.road.lane_width,
+                "vehicle": asdict(self.vehicle),
             },
         )
 
@@ -374,6 +394,7 @@ def _make_lane_keeping(
     recording,
     split,
     sensor_noise=None,
+    vehicle=None,
 ):
     section = Section(
         duration,
@@ -384,11 +405,12 @@ def _make_lane_keeping(
         scenario,
         random_state,
         road_random_state,
+        vehicle,
     )
     log = section.simulate()
     features, torque = _features(log, section.road, section.vehicle, section.speed)
     # sensors: drawn after the closed loop, which therefore does not depend on sensor_noise
-    scale = check_sensor_noise(sensor_noise)
+    scale = section.sensor_scale(sensor_noise)
     features, torque = measure(
         features, torque, 1.0 / sampling_rate, section.speed, scale, section.rng
     )
@@ -413,6 +435,7 @@ def make_lane_keeping(
     recording=None,
     split="train",
     sensor_noise="typical",
+    vehicle=None,
     cache=None,
 ):
     """Simulate a driver keeping the centre lane of a pseudo-random highway section.
@@ -460,7 +483,16 @@ default="highway"
         Measurement of the logged signals (see Sensors below). "typical": realistic sensor
         errors, derivatives computed from the measured signals, as a vehicle logs them. None or
         "none": the true states of the simulation. A float scales every error (noise, drift,
-        resolution; "typical" is 1.0). The closed loop always runs on the true states.
+        resolution; "typical" is 1.0), times the car's ``sensor_noise``. The closed loop always
+        runs on the true states.
+    vehicle : None, "default", int, dict or VehicleParameters, default=None
+        The car and its steering system (friction, power assist, column damping, inertia,
+        steering ratio, trails, sensor set). None or "default": the reference car of
+        :class:`VehicleParameters`; an int: the car :func:`draw_vehicle` draws from that seed,
+        within :data:`VEHICLE_RANGES`; a dict: the reference car with these parameters
+        replaced (``{"wheel_friction": 0.6}``). The car is drawn apart from ``random_state``:
+        the same seeds give the same road, driver and noises in every car. The driver knows
+        the car (its internal model is the car's).
     cache : str, path or joblib.Memory, default=None
         Cache the simulation on disk (only used when ``random_state`` is an int and
         ``road_random_state`` an int or None).
@@ -474,7 +506,8 @@ default="highway"
         ``crossing_time`` (on the rows of a manoeuvre, the time [s] at which the car's centre
         crosses a marking of the centre lane; NaN elsewhere or if it never does), then the 18
         candidate features :data:`FEATURE_NAMES` (Table B.2) then ``driver_torque``. SI units,
-        listed in ``frame.attrs["units"]``; ``frame.attrs["lane_width"]`` is the lane's width.
+        listed in ``frame.attrs["units"]``; ``frame.attrs["lane_width"]`` is the lane's width,
+        ``frame.attrs["vehicle"]`` the car's parameters (a dict of :class:`VehicleParameters`).
         Signs: y and yaw to the left; roll positive when the body leans right (outwards in a
         left turn); deviations are vehicle minus road (lateral at the front axle, heading at
         the road sensors at 0, 10 and 30 m ahead of the front axle);
@@ -488,7 +521,7 @@ default="highway"
     (0.41-0.47), max lateral deviation below 1.75 m (1.1-1.5; the vehicle centre never leaves
     the lane), RMS lateral acceleration 0.5-1.5 m/s^2 (0.97-1.0), RMS steering-wheel angle
     4-12 deg (6.9-7.1), max 10-40 deg (22.8-24.7). Use :func:`calibration_table` to compute them.
-    The bands hold for the true states and for the measured signals.
+    The bands hold for the true states and for the measured signals, in the reference car.
 
     Sensors (``sensor_noise="typical"``). The driver sees the world, the logger measures it:
     the sensor errors are drawn after the simulation and do not change the closed loop. Each
@@ -539,10 +572,11 @@ default="highway"
     scenario = _check_scenario(scenario)
     check_driver(driver)
     check_sensor_noise(sensor_noise)
+    vehicle = check_vehicle(vehicle)
     if int(round(duration * sampling_rate)) < 1:
         raise ValueError(f"duration={duration} s holds no sample at sampling_rate={sampling_rate}.")
     args = (duration, setting, driver, speed_kmh, sampling_rate, scenario, random_state)
-    args += (road_random_state, recording, split, sensor_noise)
+    args += (road_random_state, recording, split, sensor_noise, vehicle)
     seeded = isinstance(random_state, numbers.Integral) and (
         road_random_state is None or isinstance(road_random_state, numbers.Integral)
     )

@@ -23,17 +23,38 @@ trail, the latter fading with slip)::
 """
 
 import math
-from dataclasses import dataclass
+import numbers
+from dataclasses import asdict, dataclass, fields, replace
+
+from sklearn.utils import check_random_state
 
 GRAVITY = 9.81
 
 
 @dataclass(frozen=True)
 class VehicleParameters:
-    """Passenger-car parameters (mid-size sedan); SI units.
+    """Parameters of the simulated car and its steering system, in SI units.
 
-    The understeer gradient (about 2 deg/g) and the steering ratio give a steering-wheel angle
-    of about 7 deg per m/s^2 of lateral acceleration at 100 km/h, as in the thesis' data.
+    The default is the simulator's reference car (a mid-size sedan): its understeer gradient
+    (about 2 deg/g) and steering ratio give a steering-wheel angle of about 7 deg per m/s^2 of
+    lateral acceleration at 100 km/h, as in the thesis' data. Pass one to the simulator with
+    ``vehicle=`` (:func:`make_lane_keeping`, :func:`make_driving_protocol`, :func:`drive`);
+    :func:`draw_vehicle` draws the steering system within :data:`VEHICLE_RANGES`, and a
+    variant of the default is ``dataclasses.replace(VehicleParameters(), wheel_friction=0.5)``.
+    The virtual driver knows the car it drives: its internal model of the steering gain, of the
+    aligning torque and of the power assist is the vehicle's.
+
+    The steering column is rigid (the torque sensor reads the driver's torque at the wheel);
+    ``wheel_damping`` is the column's viscous damping and ``wheel_friction`` its Coulomb
+    friction, smoothed over ``friction_velocity``. ``sensor_noise`` scales the sensor errors of
+    the simulator's ``sensor_noise`` argument (the car's sensor set: 1 is "typical").
+
+    Examples
+    --------
+    >>> from skhmmgmr.datasets import VehicleParameters
+    >>> car = VehicleParameters()
+    >>> car.steering_ratio, car.wheel_friction
+    (16.0, 0.3)
     """
 
     mass: float = 1500.0  # [kg]
@@ -61,6 +82,7 @@ class VehicleParameters:
     assist_gain: float = 0.3  # [-] boost curve g_0
     assist_gain_slope: float = 0.15  # [1/Nm] boost curve g_1
     assist_max: float = 6.0  # [Nm] assist saturation (at the wheel)
+    sensor_noise: float = 1.0  # [-] scale of the sensor errors of this car's sensor set
 
     @property
     def wheelbase(self):
@@ -106,3 +128,108 @@ class VehicleParameters:
         g0, g1 = 1.0 + self.assist_gain, self.assist_gain_slope
         magnitude = (math.sqrt(g0 * g0 + 4.0 * g1 * abs(load)) - g0) / (2.0 * g1)
         return math.copysign(magnitude, load)
+
+
+#: What :func:`draw_vehicle` draws, uniformly within ``(low, high)``: parameter name of
+#: :class:`VehicleParameters` -> ``(low, high, unit, meaning)``. Every range holds the default
+#: car's value. The other parameters (mass, tyres, roll...) stay the default car's.
+VEHICLE_RANGES = {
+    "wheel_friction": (0.1, 0.8, "Nm", "Coulomb friction of the steering system at the wheel"),
+    "friction_velocity": (
+        0.03,
+        0.3,
+        "rad/s",
+        "steering-wheel velocity over which the friction changes sign (its band)",
+    ),
+    "assist_gain": (0.1, 1.0, "-", "power-assist boost at zero torque (g_0)"),
+    "assist_gain_slope": (0.05, 0.4, "1/Nm", "growth of the boost with the torque (g_1)"),
+    "assist_max": (3.0, 10.0, "Nm", "largest assist torque"),
+    "wheel_damping": (0.1, 0.6, "Nms/rad", "viscous damping of the column"),
+    "wheel_inertia": (0.025, 0.07, "kg m^2", "steering wheel, column and reflected rack"),
+    "steering_ratio": (13.0, 19.0, "-", "steering-wheel angle per road-wheel angle"),
+    "mechanical_trail": (0.01, 0.035, "m", "caster trail of the front wheels"),
+    "pneumatic_trail": (0.02, 0.045, "m", "pneumatic trail of the front tyres at zero slip"),
+    "sensor_noise": (0.5, 2.0, "-", "scale of every sensor error (1: typical)"),
+}
+
+
+def draw_vehicle(random_state=None):
+    """Draw a car's steering system and sensors within :data:`VEHICLE_RANGES`.
+
+    Every parameter of :data:`VEHICLE_RANGES` is drawn uniformly within its range, in the
+    order of the mapping; the others are the default car's (:class:`VehicleParameters`).
+    ``vehicle=seed`` in the simulator draws the car with ``draw_vehicle(seed)``.
+
+    Parameters
+    ----------
+    random_state : int, RandomState instance or None, default=None
+        Seeds the draw. Same int, same car.
+
+    Returns
+    -------
+    vehicle : VehicleParameters
+
+    Examples
+    --------
+    >>> from skhmmgmr.datasets import VEHICLE_RANGES, draw_vehicle
+    >>> car = draw_vehicle(0)
+    >>> low, high, unit, meaning = VEHICLE_RANGES["wheel_friction"]
+    >>> bool(low <= car.wheel_friction <= high), unit
+    (True, 'Nm')
+    """
+    rng = check_random_state(random_state)
+    drawn = {
+        name: float(rng.uniform(low, high)) for name, (low, high, *_) in VEHICLE_RANGES.items()
+    }
+    return replace(VehicleParameters(), **drawn)
+
+
+def check_vehicle(vehicle):
+    """The :class:`VehicleParameters` of the simulator's ``vehicle=`` argument.
+
+    None or "default": the default car; an int: :func:`draw_vehicle` of it; a dict: the default
+    car with these parameters replaced; a :class:`VehicleParameters`: its parameters (checked).
+    """
+    if vehicle is None or (isinstance(vehicle, str) and vehicle == "default"):
+        return VehicleParameters()
+    if isinstance(vehicle, numbers.Integral) and not isinstance(vehicle, bool):
+        return draw_vehicle(int(vehicle))
+    if isinstance(vehicle, dict):
+        known = {f.name for f in fields(VehicleParameters)}
+        unknown = sorted(str(key) for key in vehicle if key not in known)
+        if unknown:
+            raise ValueError(
+                f"vehicle has unknown parameter(s) {unknown}; expected names of "
+                f"VehicleParameters: {sorted(known)}."
+            )
+        vehicle = replace(VehicleParameters(), **vehicle)
+    if not isinstance(vehicle, VehicleParameters):
+        raise ValueError(
+            "vehicle must be None, 'default', an int seed, a dict of VehicleParameters "
+            f"fields or a VehicleParameters, got vehicle={vehicle!r}."
+        )
+    for name, value in asdict(vehicle).items():
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, numbers.Real)
+            or not math.isfinite(value)
+            or value < 0
+            or (value == 0 and name not in _MAY_BE_ZERO)
+        ):
+            least = "non-negative" if name in _MAY_BE_ZERO else "positive"
+            raise ValueError(
+                f"vehicle parameter {name} must be a finite {least} number, got {name}={value!r}."
+            )
+    return vehicle
+
+
+# parameters that may vanish (no friction, no assist, no trail, clean sensors, no roll damping)
+_MAY_BE_ZERO = {
+    "wheel_friction",
+    "wheel_damping",
+    "assist_gain",
+    "mechanical_trail",
+    "pneumatic_trail",
+    "sensor_noise",
+    "roll_damping",
+}

@@ -107,7 +107,7 @@ def adapt_parameters(
 class AdaptMixin:
     """``adapt`` (MAP adaptation to new recordings) and ``predict_ahead`` (forecasts)."""
 
-    def adapt(self, X, y, groups=None, *, relevance=16.0, parameters="m", n_iter=10, time=None):
+    def adapt(self, X, y, groups=None, *, relevance=256.0, parameters="mv", n_iter=10, time=None):
         """Adapt the fitted model to new recordings by maximum a posteriori (MAP) EM.
 
         The fitted parameters are the prior, as in GMM-UBM speaker adaptation (Reynolds et
@@ -132,17 +132,21 @@ class AdaptMixin:
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
         groups : array-like of shape (n_samples,), default=None
             Recording id of every row.
-        relevance : float, default=16.0
+        relevance : float, default=256.0
             Relevance factor ``r`` > 0: rows of evidence at which a state moves halfway from
-            its fitted parameters to those of the new data. Small values approach plain
-            (maximum likelihood) EM; ``r > 0`` keeps every adapted covariance positive
-            definite (``r S0`` is added to the scatter), even for a state the new
-            recordings never visit; the estimator's ``reg_covar`` is added to its diagonal
-            as in :meth:`fit`, so that this holds in floating point too when ``r`` is so
-            small that ``r S0`` vanishes beside the scatter.
-        parameters : str, default="m"
+            its fitted parameters to those of the new data (256 rows: about 13 s at 20 Hz).
+            Small values approach plain (maximum likelihood) EM; ``r > 0`` keeps every
+            adapted covariance positive definite (``r S0`` is added to the scatter), even
+            for a state the new recordings never visit; the estimator's ``reg_covar`` is
+            added to its diagonal as in :meth:`fit`, so that this holds in floating point
+            too when ``r`` is so small that ``r S0`` vanishes beside the scatter.
+        parameters : str, default="mv"
             Which parameters adapt: any of "m" (means), "v" (covariances) and "t" (start and
-            transition probabilities), as hmmlearn's ``params``.
+            transition probabilities), as hmmlearn's ``params``. The defaults ("mv", 256) won
+            ``benchmarks/bench_adapt_defaults.py`` (a generic model of two driver styles
+            adapted to 1, 2 and 5 minutes of the third, in the reference car and in drawn
+            cars): drivers differ in the slopes of the torque on the signals, which live in
+            the covariances; the transitions added nothing.
         n_iter : int, default=10
             Maximum number of MAP EM iterations; the estimator's ``tol`` stops them earlier.
         time : array-like of shape (n_samples,), default=None

@@ -1,0 +1,210 @@
+"""Tests of the simulator's cars: the reference car, drawn cars and the steering's stiff step."""
+
+import hashlib
+from dataclasses import asdict, replace
+
+import numpy as np
+import pytest
+
+from skhmmgmr.datasets import (
+    VEHICLE_RANGES,
+    VehicleParameters,
+    draw_vehicle,
+    drive,
+    make_driving_protocol,
+    make_lane_keeping,
+)
+from skhmmgmr.datasets._simulator import INTERNAL_RATE, STIFF_STEP
+
+# The car a model drives alone (no arm inertia) that explicit Euler makes chatter: the widest
+# friction against the lightest wheel of VEHICLE_RANGES.
+STIFF_CAR = {
+    "wheel_friction": 0.8,
+    "friction_velocity": 0.03,
+    "wheel_inertia": 0.025,
+    "wheel_damping": 0.6,
+}
+
+
+def digest(frame):
+    """SHA-256 of a frame's values, column by column (floats as their bytes)."""
+    h = hashlib.sha256()
+    for name in frame.columns:
+        column = frame[name]
+        if column.dtype.kind in "fiu":
+            h.update(np.ascontiguousarray(column.to_numpy(dtype=float)).tobytes())
+        else:
+            h.update("|".join(map(str, column)).encode())
+    return h.hexdigest()
+
+
+def weaving(rate):
+    """A callable driver: a 0.5 Hz torque sine with a little angle feedback."""
+    count = [0]
+
+    def driver(row):
+        count[0] += 1
+        return np.sin(np.pi * count[0] / rate) - 0.5 * row[0]
+
+    return driver
+
+
+def test_the_reference_car_drives_bit_for_bit_as_before_cars_varied():
+    # digests of the simulator before the car became a parameter (same machine arithmetic)
+    assert digest(make_lane_keeping(5.0, random_state=0)) == (
+        "a35e87a355412472540197e513e85f9951472d4b53c035785ca82e9fe35b1474"
+    )
+    frame = make_lane_keeping(5.0, sampling_rate=20.0, driver="novice", random_state=3)
+    assert digest(frame) == "3504a53908b2f847d635b3ec7ffe1d07c96b2e978ad7d0c4aff77ce670d3cb90"
+    assert digest(drive(lambda row: -2.0 * row[11], duration=5.0, random_state=1)) == (
+        "7ede6aa2c11cd082a8755b444389b5d735c8f54556f06b1b8e38e7a281d09e3d"
+    )
+    for same in ("default", {}, VehicleParameters()):
+        other = make_lane_keeping(5.0, sampling_rate=20.0, driver="novice", random_state=3)
+        assert digest(
+            make_lane_keeping(
+                5.0, sampling_rate=20.0, driver="novice", random_state=3, vehicle=same
+            )
+        ) == digest(other)
+    assert frame.attrs["vehicle"] == asdict(VehicleParameters())
+
+
+def test_the_reference_car_steps_explicitly_at_the_internal_rate():
+    car = VehicleParameters()
+    ratio = (car.wheel_damping + car.wheel_friction / car.friction_velocity) / car.wheel_inertia
+    assert ratio / INTERNAL_RATE < STIFF_STEP
+
+
+def test_a_seed_draws_every_range_and_only_those():
+    reference = asdict(VehicleParameters())
+    for seed in range(20):
+        car = asdict(draw_vehicle(seed))
+        for name, value in car.items():
+            if name in VEHICLE_RANGES:
+                low, high, unit, meaning = VEHICLE_RANGES[name]
+                assert low <= value <= high and unit and meaning, name
+            else:
+                assert value == reference[name], name
+    assert draw_vehicle(4) == draw_vehicle(4) != draw_vehicle(5)
+    for name, (low, high, *_) in VEHICLE_RANGES.items():
+        assert low <= reference[name] <= high, name
+
+
+def test_a_seed_or_its_drawn_car_give_the_same_frame():
+    reference = make_lane_keeping(20.0, random_state=2, sensor_noise=None)
+    drawn = make_lane_keeping(20.0, random_state=2, sensor_noise=None, vehicle=7)
+    assert drawn.attrs["vehicle"] == asdict(draw_vehicle(7))
+    assert not np.allclose(drawn["driver_torque"], reference["driver_torque"])
+    again = make_lane_keeping(20.0, random_state=2, sensor_noise=None, vehicle=draw_vehicle(7))
+    assert digest(again) == digest(drawn)
+
+
+def test_a_dict_replaces_the_reference_car_parameters():
+    frame = make_lane_keeping(5.0, random_state=0, vehicle={"wheel_friction": 0.6})
+    assert frame.attrs["vehicle"] == asdict(replace(VehicleParameters(), wheel_friction=0.6))
+
+
+def test_the_car_sensor_noise_scales_every_sensor_error():
+    clean = make_lane_keeping(10.0, random_state=1, sensor_noise=None)
+    errors = {}
+    for scale in (1.0, 2.0):
+        frame = make_lane_keeping(10.0, random_state=1, vehicle={"sensor_noise": scale})
+        assert frame.attrs["sensor_noise"] == scale
+        errors[scale] = frame["lateral_acceleration"] - clean["lateral_acceleration"]
+    np.testing.assert_allclose(errors[2.0], 2.0 * errors[1.0], rtol=1e-9, atol=1e-12)
+    quiet = make_lane_keeping(10.0, random_state=1, sensor_noise=None, vehicle={"sensor_noise": 2})
+    assert quiet.attrs["sensor_noise"] is None
+
+
+@pytest.mark.parametrize(
+    "vehicle, message",
+    [
+        ({"wheel_fiction": 0.3}, "unknown parameter(s) ['wheel_fiction']"),
+        ({"wheel_friction": -0.1}, "wheel_friction=-0.1"),
+        ({"assist_gain_slope": 0.0}, "assist_gain_slope must be a finite positive"),
+        ({"steering_ratio": float("nan")}, "steering_ratio=nan"),
+        ({"wheel_inertia": "heavy"}, "wheel_inertia='heavy'"),
+        ({"assist_gain": True}, "assist_gain=True"),
+        ("sport", "vehicle='sport'"),
+        (1.5, "vehicle=1.5"),
+    ],
+)
+def test_a_bad_vehicle_names_the_parameter_and_value(vehicle, message):
+    for simulate in (
+        lambda: make_lane_keeping(1.0, random_state=0, vehicle=vehicle),
+        lambda: drive(lambda row: 0.0, duration=1.0, random_state=0, vehicle=vehicle),
+        lambda: make_driving_protocol(
+            ("defensive",),
+            n_train_per_setting=0,
+            n_validation=1,
+            n_test=0,
+            duration=1.0,
+            vehicle=vehicle,
+        ),
+    ):
+        with pytest.raises(ValueError, match="vehicle") as error:
+            simulate()
+        assert message in str(error.value)
+
+
+def test_the_protocol_drives_every_recording_in_its_car():
+    kwargs = dict(n_train_per_setting=0, n_validation=1, n_test=1, duration=5.0, random_state=0)
+    drawn = make_driving_protocol(("defensive", "novice"), vehicle=3, **kwargs)
+    assert drawn.attrs["vehicle"] == asdict(draw_vehicle(3))
+    reference = make_driving_protocol(("defensive", "novice"), **kwargs)
+    assert reference.attrs["vehicle"] == asdict(VehicleParameters())
+    first = make_lane_keeping(
+        5.0, driver="defensive", random_state=0, vehicle=3, sensor_noise="typical"
+    )
+    assert first.attrs["vehicle"] == drawn.attrs["vehicle"]
+    assert not np.allclose(drawn["driver_torque"], reference["driver_torque"])
+
+
+@pytest.mark.parametrize("rate", [20.0, 100.0])
+def test_thirty_drawn_cars_stay_finite_and_bounded(rate):
+    for seed in range(30):
+        frame = make_lane_keeping(
+            30.0,
+            sampling_rate=rate,
+            driver=("defensive", "novice", "aggressive")[seed % 3],
+            random_state=seed,
+            vehicle=seed,
+            sensor_noise=None,
+        )
+        values = frame.drop(columns="crossing_time").select_dtypes(float).to_numpy()
+        assert np.isfinite(values).all(), seed
+        assert abs(frame["steering_wheel_angle"]).max() < 1.0, seed  # 57 deg
+        assert abs(frame["steering_wheel_velocity"]).max() < 5.0, seed
+        assert abs(frame["driver_torque"]).max() < 15.0, seed
+        assert abs(frame["lateral_deviation_0m"]).max() < 1.75, seed
+
+
+@pytest.mark.parametrize("rate", [20.0, 100.0])
+def test_a_stiff_car_under_a_model_does_not_chatter(rate):
+    # Without the arms' inertia the wheel of STIFF_CAR steps at 5.4 times the explicit limit
+    # per unit; the explicit step chattered at 15 rad/s^2 RMS there, the implicit one stays
+    # with the reference car's.
+    runs = {}
+    for name, car in (("stiff", STIFF_CAR), ("reference", None)):
+        with pytest.warns(UserWarning, match="lost control"):
+            runs[name] = drive(
+                weaving(rate),
+                duration=20.0,
+                sampling_rate=rate,
+                random_state=0,
+                vehicle=car,
+                sensor_noise=None,
+            )
+    stiff, reference = (runs[k]["steering_wheel_acceleration"].std() for k in runs)
+    assert stiff < 2.0 * reference + 1.0
+    for seed in range(30):
+        frame = drive(
+            weaving(rate),
+            duration=5.0,
+            sampling_rate=rate,
+            random_state=seed,
+            vehicle=seed,
+            sensor_noise=None,
+        )
+        assert np.isfinite(frame["steering_wheel_acceleration"]).all(), seed
+        assert frame["steering_wheel_acceleration"].std() < 5.0, seed
