@@ -132,9 +132,9 @@ def torque_ahead(
     >>> ahead = torque_ahead(model, horizons=(0.5, 1.0), duration=10.0, sampling_rate=20.0,
     ...                      start_every=10, random_state=1)
     >>> ahead.shape
-    (18, 6)
+    (36, 6)
     >>> ahead.groupby("horizon").size().to_dict()
-    {0.5: 9, 1.0: 9}
+    {0.5: 18, 1.0: 18}
     """
     duration = _check_positive(duration, "duration")
     sampling_rate = _check_positive(sampling_rate, "sampling_rate")
@@ -166,14 +166,7 @@ def torque_ahead(
         road_random_state,
     )
     log = section.simulate()
-    clean, torque = _features(log, section.road, section.vehicle, section.speed)
-    dt = 1.0 / sampling_rate
-    # the errors make_lane_keeping draws, kept for the rollouts' rows
-    errors = None
-    if scale is not None:
-        errors = draw_errors(len(torque), dt, scale, copy.deepcopy(section.rng))
-    measured, torque = measure(clean, torque, dt, section.speed, scale, section.rng)
-    sensed = np.column_stack([measured[name] for name in FEATURE_NAMES])
+    sensed, torque, errors = measured_log(section, log, scale)
 
     stream, positions = torque_of
     n_ahead = max(rows_ahead)
@@ -213,6 +206,19 @@ def torque_ahead(
         for k in range(n_states):
             result[f"state_proba_{k}"] = proba[:, :, k].T.ravel()
     return pd.DataFrame(result)
+
+
+def measured_log(section, log, scale):
+    """What the logger records of ``log`` (as :func:`make_lane_keeping` measures it): the
+    sensed rows (columns in the order of :data:`FEATURE_NAMES`), the measured torque, and the
+    sensor errors drawn for them (``None`` without errors), which go on in the rollouts."""
+    clean, torque = _features(log, section.road, section.vehicle, section.speed)
+    dt = 1.0 / section.sampling_rate
+    errors = None
+    if scale is not None:
+        errors = draw_errors(len(torque), dt, scale, copy.deepcopy(section.rng))
+    measured, torque = measure(clean, torque, dt, section.speed, scale, section.rng)
+    return np.column_stack([measured[name] for name in FEATURE_NAMES]), torque, errors
 
 
 def _model_stream(model):
