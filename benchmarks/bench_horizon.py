@@ -3,7 +3,8 @@
 A preview model (``HMMGMRRegressor(n_states=5)`` on ``PREVIEW_FEATURES``) is fitted on a
 driver style's protocol training recordings (``make_driving_protocol``, measured sensors).
 On held-out setting-7 roads driven by the same style, the torque ``h`` seconds after every
-sample ``t`` (h = 0.25, 0.5, 1 and 2 s) is estimated from what is known at ``t`` by:
+sample ``t`` (h = 0.25, 0.5, 1 and 2 s; 0 for reference) is estimated from what is known at
+``t`` by:
 
 - ``rollout``: ``skhmmgmr.datasets.torque_ahead``, the simulator's vehicle integrated from
   the state at ``t`` with the model's torque, the model streamed on the rollout's features
@@ -45,7 +46,7 @@ from skhmmgmr.datasets import (
 from skhmmgmr.metrics import accuracy_score, smoothness_score
 
 PREVIEW = list(PREVIEW_FEATURES)
-HORIZONS = (0.25, 0.5, 1.0, 2.0)
+HORIZONS = (0.0, 0.25, 0.5, 1.0, 2.0)
 
 
 def _parse(argv=None):
@@ -88,6 +89,7 @@ def forecasts(model, shifted, args, seed):
     )
     recorded = make_lane_keeping(**road)
     X, torque = recorded[PREVIEW], recorded["driver_torque"].to_numpy()
+    groups = recorded["recording"].to_numpy()
     start = time.perf_counter()
     rolled = torque_ahead(model, horizons=HORIZONS, **road)
     elapsed = time.perf_counter() - start
@@ -111,7 +113,7 @@ def forecasts(model, shifted, args, seed):
                     "ahead_conditional": model.predict_ahead(X, rows, state_output="conditional")[
                         starts
                     ],
-                    "shifted": shifted[horizon].predict(X)[starts],
+                    "shifted": shifted[horizon].predict(X, groups=groups)[starts],
                     "measured": target,
                 },
                 int(at["lost_control"].sum()),

@@ -151,7 +151,7 @@ def torque_ahead(
         raise ValueError(
             f"start_every must be a positive integer, got start_every={start_every!r}."
         )
-    torque_of = _model_stream(model)
+    stream, positions = _model_stream(model)
     n_samples = int(round(duration * sampling_rate))
     horizons, rows_ahead = _check_horizons(horizons, sampling_rate, n_samples)
 
@@ -168,7 +168,6 @@ def torque_ahead(
     log = section.simulate()
     sensed, torque, errors = measured_log(section, log, scale)
 
-    stream, positions = torque_of
     n_ahead = max(rows_ahead)
     starts = np.arange(0, n_samples - n_ahead, start_every)
     estimates = np.empty((len(starts), len(rows_ahead)))
@@ -181,9 +180,9 @@ def torque_ahead(
         estimate = stream.update(sensed[t, positions])
         if t != starts[next_start]:
             continue
-        rollout = copy.deepcopy(stream)
+        copied = copy.deepcopy(stream)  # the rollout goes on from the filter state at t
         path, path_proba = _torque_path(
-            section, log, sensed, errors, scale, t, n_ahead, estimate, rollout, positions
+            section, log, sensed, errors, scale, t, n_ahead, estimate, copied, positions
         )
         estimates[next_start] = path[np.minimum(columns, len(path) - 1)]
         lost[next_start] = columns >= len(path)
