@@ -9,7 +9,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from sklearn.linear_model import Ridge
 
-from skhmmgmr import HMMGMRRegressor
+from skhmmgmr import HMMGMRRegressor, make_torque_pipeline
 from skhmmgmr.datasets import (
     FEATURE_NAMES,
     PREVIEW_FEATURES,
@@ -24,6 +24,7 @@ from skhmmgmr.datasets._simulator import Section
 RATE = 50.0
 SEEDS = dict(random_state=5, road_random_state=7)
 PREVIEW = list(PREVIEW_FEATURES)
+FEATURES = list(FEATURE_NAMES)
 
 
 @pytest.fixture(scope="module")
@@ -176,3 +177,14 @@ def test_models_that_cannot_roll_out_are_refused(preview_model):
         torque_ahead(unnamed, duration=8.0, sampling_rate=RATE)
     with pytest.raises(ValueError, match="driver"):
         torque_ahead(preview_model, driver="racer", duration=8.0, sampling_rate=RATE)
+
+
+def test_a_torque_pipeline_rolls_out_with_its_derived_inputs():
+    human = make_lane_keeping(30.0, sampling_rate=RATE, random_state=0)
+    pipe = make_torque_pipeline(2, random_state=0).fit(human[FEATURES], human["driver_torque"])
+    ahead = torque_ahead(pipe, horizons=(0.0, 0.5), duration=5.0, sampling_rate=RATE, **SEEDS)
+    recorded = make_lane_keeping(5.0, sampling_rate=RATE, **SEEDS)
+    now = ahead[ahead["horizon"] == 0.0]
+    starts = np.round(now["time"].to_numpy() * RATE).astype(int)
+    assert_allclose(now["estimate"], pipe.predict(recorded[FEATURES])[starts], atol=1e-12)
+    assert np.isfinite(ahead["estimate"]).all()
