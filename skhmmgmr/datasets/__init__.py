@@ -21,6 +21,7 @@ from ._comma2k19_scan import scan_comma2k19
 from ._drive import drive
 from ._driver import DRIVER_STYLES, DriverParameters
 from ._fetch import COMMA2K19_URL, fetch_comma2k19
+from ._horizon import torque_ahead
 from ._protocol import make_driving_protocol
 from ._recordings import load_recordings
 from ._resample import resample_recordings
@@ -50,6 +51,7 @@ __all__ = [
     "resample_recordings",
     "scan_comma2k19",
     "shift_target",
+    "torque_ahead",
     "to_panel",
     "DRIVER",
     "FEATURE_NAMES",

@@ -172,9 +172,7 @@ def drive(
     torques = np.empty(section.n_samples)
 
     def torque_source(row, states):
-        log = np.array([(*states, 0.0)])
-        columns, _ = _features(log, section.road, section.vehicle, section.speed)
-        sensed[row] = sensors.features(row, {k: float(v[0]) for k, v in columns.items()})
+        sensed[row] = sense(section, sensors, row, states)
         view = sensed[row]
         view.flags.writeable = False
         try:
@@ -208,6 +206,14 @@ def drive(
             stacklevel=2,
         )
     return frame
+
+
+def sense(section, sensors, row, states):
+    """The sensed features of logged row ``row`` of ``section``, in the order of
+    :data:`FEATURE_NAMES`, from the states a torque source of :func:`_simulate` gets."""
+    log = np.array([(*states, 0.0)])
+    columns, _ = _features(log, section.road, section.vehicle, section.speed)
+    return sensors.features(row, {k: float(v[0]) for k, v in columns.items()})
 
 
 def _torque_function(driver):

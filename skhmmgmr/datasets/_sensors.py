@@ -221,6 +221,27 @@ class SensorStream:
         measured["slip_angle"] = math.atan2(measured["lateral_velocity"], self.speed)
         return np.array([measured[name] for name in self.names])
 
+    def continue_from(self, row):
+        """Go on after a sample the logger measured: the next sample's ECU derivatives
+        difference from ``row``'s measured signals and filter on from its derivatives, as
+        :func:`measure` does from one row to the next.
+
+        Parameters
+        ----------
+        row : mapping of str to float
+            The measured features of the sample before, by name (all the signals of
+            :data:`DERIVATIVES` and their sources).
+
+        Returns
+        -------
+        self : SensorStream
+        """
+        if self.scale is not None:
+            for name, (source, _) in DERIVATIVES.items():
+                self._previous[source] = float(row[source])
+                self._filtered[name] = float(row[name])
+        return self
+
     def torque(self, i, torque):
         """The driver torque of sample ``i`` as the torque sensor reads it."""
         if self.scale is None:

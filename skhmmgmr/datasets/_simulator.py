@@ -70,7 +70,17 @@ def draw_remnants(driver, n_steps, dt, rng):
 
 
 def _simulate(
-    road, offsets, vehicle, driver, speed, n_samples, n_sub, dt, remnants, torque_source=None
+    road,
+    offsets,
+    vehicle,
+    driver,
+    speed,
+    n_samples,
+    n_sub,
+    dt,
+    remnants,
+    torque_source=None,
+    initial=None,
 ):
     """Integrate the closed loop with semi-implicit Euler; return logged states (n_samples, 14).
 
@@ -79,6 +89,10 @@ def _simulate(
     torque (the steering-wheel acceleration of the integration step before); its torque acts
     at the torsion bar until the next sample. It may lose control: the log then ends at the
     sample where the lateral deviation first exceeds :data:`LOST_CONTROL`.
+
+    ``initial`` (with a ``torque_source`` only): start from a logged state instead of rest,
+    ``(theta, theta_d, theta_dd, v, r, phi, phi_d, s, e_y, e_psi, t_driver)`` with the driver
+    torque of the integration step before (which sets the power assist's gain).
     """
     n_steps = n_samples * n_sub
     u = speed
@@ -136,6 +150,10 @@ def _simulate(
     s = e_y = e_psi = s_d = e_y_d = e_psi_d = 0.0
     theta = theta_d = theta_dd = v = r = phi = phi_d = 0.0
     t_muscle = t_driver = theta_des = 0.0
+    if initial is not None:
+        if torque_source is None:
+            raise ValueError("initial needs a torque_source (a human starts at rest)")
+        theta, theta_d, theta_dd, v, r, phi, phi_d, s, e_y, e_psi, t_driver = map(float, initial)
     delay_line = [0.0] * n_delay
     log = np.empty((n_samples, 14))
     row = 0
