@@ -170,13 +170,13 @@ def _fit_on(estimator, X, y, groups, rows, features, n_states):
         return model.fit(X.loc[rows, list(features)].to_numpy(), y[rows], groups=groups[rows])
 
 
-@fill_shared_parameters
 def _check_screening_tol(value):
     if isinstance(value, bool) or not isinstance(value, Real) or not value > 0 or value == np.inf:
         raise ValueError(f"screening_tol must be a positive finite number or None, got {value!r}")
     return float(value)
 
 
+@fill_shared_parameters
 def select_parameters(
     data,
     *,
