@@ -1,7 +1,8 @@
 """Portable model file: any fitted model of the package as plain JSON, readable without it.
 
-:func:`save` writes a fitted :class:`~skhmmgmr.HMMGMRRegressor`, or a fitted pipeline of
-:class:`~skhmmgmr.SteeringFeatures` steps followed by one (the
+:func:`save` writes a fitted :class:`~skhmmgmr.HMMGMRRegressor` or
+:class:`~skhmmgmr.HierarchicalHMMGMRRegressor`, or a fitted pipeline of
+:class:`~skhmmgmr.SteeringFeatures` steps followed by one of them (the
 :class:`~skhmmgmr.torque_pipeline.TorquePipeline` of :func:`~skhmmgmr.make_torque_pipeline`,
 or a scikit-learn :class:`~sklearn.pipeline.Pipeline` of the same steps); :func:`load` reads it
 back, predicting bit for bit as the saved object. The regressor's
@@ -17,15 +18,17 @@ The file is one JSON object. Its header, for every kind of model:
     written by skhmmgmr 0.1.0, held the regressor without ``model_type`` and ``training``, and
     still loads) and which skhmmgmr wrote it. Readers refuse newer format versions.
 ``model_type``
-    ``"HMMGMRRegressor"``, ``"TorquePipeline"`` or ``"Pipeline"`` (absent in version 1: a
-    regressor).
+    ``"HMMGMRRegressor"``, ``"HierarchicalHMMGMRRegressor"``, ``"TorquePipeline"`` or
+    ``"Pipeline"`` (absent in version 1: a regressor).
 ``training`` (optional)
     Facts about the training data that predictions read: ``longest_recording`` (rows of the
     longest training recording, or null: ``predict`` warns above it without recordings; the
     estimator's ``longest_recording_``), ``sampling_period`` (seconds between two rows, when
     known) and ``units`` (input or output name -> unit text, those known).
 
-A regressor's file (``model_type`` ``"HMMGMRRegressor"``) holds next to the header:
+A regressor's file (``model_type`` ``"HMMGMRRegressor"``, or
+``"HierarchicalHMMGMRRegressor"``: the same keys and the same filter over all its states,
+the manoeuvres' probabilities being the sums of their states') holds next to the header:
 
 ``n_states``, ``n_inputs``, ``n_outputs``
     ``K``, ``F`` and ``O``.
@@ -58,8 +61,10 @@ A regressor's file (``model_type`` ``"HMMGMRRegressor"``) holds next to the head
     ``null`` where unknown): every input's variogram, the variance of its value ``lag``
     samples earlier about its current one (:mod:`skhmmgmr._hmm._stale_inputs`).
 ``estimator_params``, ``fit_info``
-    Hyperparameters (``get_params()``) and, optionally, ``log_likelihood``,
-    ``log_likelihood_history``, ``penalized_log_likelihood``,
+    Hyperparameters (``get_params()``; for a ``"HierarchicalHMMGMRRegressor"``,
+    ``manoeuvres`` and ``n_states`` are the lists of the manoeuvres' names and of their
+    states, whose blocks of consecutive states the filter's arrays follow) and, optionally,
+    ``log_likelihood``, ``log_likelihood_history``, ``penalized_log_likelihood``,
     ``penalized_log_likelihood_history``, ``n_iter`` and ``converged``.
 
 A pipeline's file (``model_type`` ``"TorquePipeline"`` or ``"Pipeline"``) holds next to the
@@ -78,8 +83,9 @@ steps in order, each an object with ``name`` (the step's name in the pipeline) a
   the velocity through ``y_t = d y_(t-1) + (1 - d) x_t``, ``d = exp(-sampling_period /
   tau)``, restarted at every recording at its first observed value; after ``g`` missing
   values the next one ``x`` enters as ``y = d^(g+1) y_last + (1 - d^(g+1)) x``.
-- one ``"HMMGMRRegressor"`` step, last: ``model``, a regressor's file as above (its own
-  header included), whose inputs are the outputs of the steps before it.
+- one ``"HMMGMRRegressor"`` (or ``"HierarchicalHMMGMRRegressor"``) step, last: ``model``, a
+  regressor's file as above (its own header included, of the same ``model_type``), whose
+  inputs are the outputs of the steps before it.
 
 The filter (METHOD.md section 2): ``alpha_1 ∝ pi * b(z_1)``, ``alpha_t ∝ (alpha_{t-1} @ A) *
 b(z_t)``, estimate ``sum_k alpha_t,k m_k(z_t)``, where ``b_k`` is the Gaussian density of the
@@ -116,7 +122,9 @@ from ._hmm._portable import (
     FIT_INFO_KEYS,
     FORMAT_NAME,
     FORMAT_VERSION,
+    HIERARCHICAL_TYPE,
     REGRESSOR_TYPE,
+    REGRESSOR_TYPES,
     PortableModel,
     export_json,
     load_json,
@@ -126,7 +134,7 @@ from ._hmm._portable import (
     to_dict,
 )
 from ._version import __version__
-from .estimator import HMMGMRRegressor
+from .estimator import HierarchicalHMMGMRRegressor, HMMGMRRegressor
 from .torque_pipeline import SteeringFeatures, TorquePipeline, restore_steering_features
 
 __all__ = [
@@ -147,6 +155,7 @@ __all__ = [
 #: The classes a model file holds, by their ``model_type``.
 MODEL_TYPES = {
     REGRESSOR_TYPE: HMMGMRRegressor,
+    HIERARCHICAL_TYPE: HierarchicalHMMGMRRegressor,
     "TorquePipeline": TorquePipeline,
     "Pipeline": Pipeline,
 }
@@ -167,10 +176,11 @@ def save(fitted, path, *, output_names=None, units=None, sampling_period=None):
 
     Parameters
     ----------
-    fitted : HMMGMRRegressor, TorquePipeline or Pipeline
+    fitted : HMMGMRRegressor, HierarchicalHMMGMRRegressor, TorquePipeline or Pipeline
         Fitted. A pipeline's steps are :class:`~skhmmgmr.SteeringFeatures` steps followed by
         one :class:`~skhmmgmr.HMMGMRRegressor` (as :func:`~skhmmgmr.make_torque_pipeline`
-        makes); anything else is refused, naming the step or the type.
+        makes) or :class:`~skhmmgmr.HierarchicalHMMGMRRegressor`; anything else (subclasses
+        included) is refused, naming the step or the type.
     path : str or path-like
         The file to write (strict JSON, UTF-8).
     output_names : list of str, default=None
@@ -225,7 +235,7 @@ def load(path, *, return_training=False):
 
     Returns
     -------
-    model : HMMGMRRegressor, TorquePipeline or Pipeline
+    model : HMMGMRRegressor, HierarchicalHMMGMRRegressor, TorquePipeline or Pipeline
         Fitted, of the saved class; predicts bit for bit as the saved model.
     training : dict
         With ``return_training``: ``longest_recording``, ``sampling_period`` and ``units``,
@@ -290,8 +300,13 @@ def _type_name(value):
     return f"{kind.__module__}.{kind.__qualname__}"
 
 
+def _is_regressor(value):
+    """Whether ``value`` is exactly one of the regressor classes a model file holds."""
+    return any(type(value) is MODEL_TYPES[name] for name in REGRESSOR_TYPES)
+
+
 def _model_dict(fitted, *, output_names, units, period):
-    if type(fitted) is HMMGMRRegressor:
+    if _is_regressor(fitted):
         data = fitted.to_dict(output_names=output_names)
         names = [*data["feature_names"], *data["output_names"]]
         data["training"] = _training(data["training"], units, period, names)
@@ -299,8 +314,9 @@ def _model_dict(fitted, *, output_names, units, period):
     model_type = next((name for name, cls in MODEL_TYPES.items() if type(fitted) is cls), None)
     if model_type is None:
         raise TypeError(
-            f"a model file holds an HMMGMRRegressor, a TorquePipeline or a Pipeline of "
-            f"SteeringFeatures steps and an HMMGMRRegressor; got {_type_name(fitted)}"
+            "a model file holds an HMMGMRRegressor, a HierarchicalHMMGMRRegressor, a "
+            "TorquePipeline or a Pipeline of SteeringFeatures steps and one of the two "
+            f"regressors; got {_type_name(fitted)}"
         )
     *transformers, (last_name, regressor) = fitted.steps
     steps = []
@@ -313,13 +329,13 @@ def _model_dict(fitted, *, output_names, units, period):
             )
         check_is_fitted(step, "n_features_in_")
         steps.append(_steering_dict(name, step))
-    if type(regressor) is not HMMGMRRegressor:
+    if not _is_regressor(regressor):
         raise TypeError(
             f"the pipeline's last step {last_name!r} is {_type_name(regressor)}, not an "
-            "HMMGMRRegressor"
+            "HMMGMRRegressor or a HierarchicalHMMGMRRegressor"
         )
     model = regressor.to_dict(output_names=output_names)
-    steps.append({"name": str(last_name), "type": REGRESSOR_TYPE, "model": model})
+    steps.append({"name": str(last_name), "type": model["model_type"], "model": model})
     if period is None:
         periods = [step.sampling_period for _, step in transformers]
         period = next((p for p in periods if p is not None), None)
@@ -336,7 +352,7 @@ def _model_dict(fitted, *, output_names, units, period):
 
 def _inputs_of(step):
     """Input names of a step's block (positional ``x0``... without names)."""
-    if step["type"] == REGRESSOR_TYPE:
+    if step["type"] in REGRESSOR_TYPES:
         return step["model"]["feature_names"]
     names = step["feature_names_in"]
     return names if names is not None else [f"x{i}" for i in range(step["n_features_in"])]
@@ -400,8 +416,8 @@ def _model_from_dict(data):
             f"'model_type' is {model_type!r:.100}; this version of skhmmgmr reads "
             f"{sorted(MODEL_TYPES)}"
         )
-    if model_type == REGRESSOR_TYPE:
-        model = HMMGMRRegressor.from_dict(data)
+    if model_type in REGRESSOR_TYPES:
+        model = MODEL_TYPES[model_type].from_dict(data)
         names = [*data["feature_names"], *data["output_names"]]
         return model, read_training(data.get("training"), names)
     return _pipeline_from_dict(data, MODEL_TYPES[model_type])
@@ -423,15 +439,15 @@ def _pipeline_from_dict(data, cls):
             raise ValueError(f"'{where}.name' {name!r} names two steps")
         kind = _require(block, "type", f"{where}.")
         last = index == len(blocks) - 1
-        expected = REGRESSOR_TYPE if last else STEERING_TYPE
-        if kind != expected:
-            known = f"{STEERING_TYPE!r} steps followed by one {REGRESSOR_TYPE!r}"
+        expected = REGRESSOR_TYPES if last else (STEERING_TYPE,)
+        if kind not in expected:
+            known = f"{STEERING_TYPE!r} steps followed by one of {list(REGRESSOR_TYPES)}"
             raise ValueError(
-                f"'{where}.type' is {kind!r:.100}, expected {expected!r}: a pipeline's steps "
-                f"are {known}"
+                f"'{where}.type' is {kind!r:.100}, expected one of {list(expected)}: a "
+                f"pipeline's steps are {known}"
             )
         if last:
-            step = _regressor_step(_require(block, "model", f"{where}."), where)
+            step = _regressor_step(_require(block, "model", f"{where}."), where, kind)
         else:
             step = _steering_step(block, where)
         if previous is not None:
@@ -450,9 +466,9 @@ def _pipeline_from_dict(data, cls):
     return cls(steps), training
 
 
-def _regressor_step(model, where):
+def _regressor_step(model, where, kind):
     try:
-        return HMMGMRRegressor.from_dict(model)
+        return MODEL_TYPES[kind].from_dict(model)
     except ValueError as exc:
         raise ValueError(f"in '{where}.model': {exc}") from exc
 

@@ -224,6 +224,17 @@ def test_a_restart_from_the_input_densities_as_predict_does(tmp_path):
     _close(stds[:, 0], expected_std, model.model_.standardization.output_scale)
 
 
+def _compiled_is_predict(model, compiled, X, groups):
+    """Check the compiled pipeline's estimates and std against predict's; the estimates."""
+    estimates, stds, codes = compiled.run(X, groups)
+    expected, expected_std = model.predict(X, groups=groups, return_std=True)
+    scale = model[-1].model_.standardization.output_scale
+    assert not codes.any()
+    _close(estimates[:, 0], expected, scale)
+    _close(stds[:, 0], expected_std, scale)
+    return expected
+
+
 @pytest.fixture(scope="module")
 def pipeline(protocol, tmp_path_factory):
     """K=12 over the 18 sensed inputs and the 5 derived ones (23 inputs), velocity filter on."""
@@ -239,12 +250,7 @@ def test_the_pipelines_derived_inputs_and_velocity_filter(pipeline, protocol):
     model, compiled = pipeline
     assert model[-1].n_features_in_ == 23
     X, groups = protocol[list(FEATURE_NAMES)], protocol["recording"]
-    estimates, stds, codes = compiled.run(X, groups)
-    expected, expected_std = model.predict(X, groups=groups, return_std=True)
-    scale = model[-1].model_.standardization.output_scale
-    assert not codes.any()
-    _close(estimates[:, 0], expected, scale)
-    _close(stds[:, 0], expected_std, scale)
+    expected = _compiled_is_predict(model, compiled, X, groups)
     # one recording for all rows: another velocity filter, other estimates
     merged, _, _ = compiled.run(X, np.zeros(len(X)))
     assert np.max(np.abs(merged[:, 0] - expected)) > 1e-6
@@ -404,3 +410,28 @@ def test_input_names_are_escaped_c_strings(tmp_path):
     _close(estimates[:, 0], pipe.predict(X), pipe[-1].model_.standardization.output_scale)
     name = compiled.function("input_name", ctypes.c_char_p, ctypes.c_int)
     assert [name(i).decode() for i in range(2)] == ["x0", "x1"]
+
+
+def test_a_pipeline_ending_in_the_hierarchical_regressor(protocol, tmp_path):
+    # its model_ is a flat HMM-GMR over all its states: the C filter is that of predict
+    from sklearn.pipeline import make_pipeline
+
+    from skhmmgmr import HierarchicalHMMGMRRegressor
+
+    inputs = list(FEATURE_NAMES[:3])
+    labels = np.where(protocol["steering_wheel_angle"] > 0, "left", "right")
+    model = make_pipeline(
+        SteeringFeatures(friction_velocity=None, load_columns=(), powers=()),
+        HierarchicalHMMGMRRegressor(["left", "right"], n_states=[2, 1], random_state=0),
+    )
+    X, y, groups = protocol[inputs], protocol["driver_torque"], protocol["recording"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        model.fit(
+            X,
+            y,
+            hierarchicalhmmgmrregressor__groups=groups,
+            hierarchicalhmmgmrregressor__manoeuvre=labels,
+        )
+    compiled = Compiled(model, tmp_path, name="hierarchy")
+    _compiled_is_predict(model, compiled, X, groups)

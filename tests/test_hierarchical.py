@@ -249,3 +249,45 @@ def test_manoeuvre_labels_are_routed_as_metadata():
     assert np.all(scores["test_score"] > 0.9)
     # a fold fitted on its own labels: both manoeuvres were labelled in it
     assert all(list(e.manoeuvres_) == ["keep", "change"] for e in scores["estimator"])
+
+
+def test_a_start_from_the_flat_model_keeps_its_states_and_names_them_by_the_labels():
+    from skhmmgmr import HMMGMRRegressor
+
+    X, y, labels, groups = two_manoeuvres()
+    flat = HMMGMRRegressor(n_states=4, random_state=0).fit(X, y, groups=groups)
+    model = HierarchicalHMMGMRRegressor(
+        manoeuvres=["keep", "change"],
+        n_states=[3, 1],
+        start="flat",
+        refine_iter=0,
+        random_state=0,
+    ).fit(X, y, groups=groups, manoeuvre=labels)
+    # the flat model's states, reordered by manoeuvre: "keep" has x < 0, "change" x > 0
+    order = np.argsort(flat.means_[:, 0])
+    np.testing.assert_allclose(np.sort(model.means_[:, 0]), flat.means_[order, 0])
+    assert model.states_per_manoeuvre_.sum() == 4
+    keep = model.state_manoeuvre_ == 0
+    assert np.all(model.means_[keep, 0] < 0) and np.all(model.means_[~keep, 0] > 0)
+    assert list(model.states_per_manoeuvre_) == [
+        int(np.sum(flat.means_[:, 0] < 0)),
+        int(np.sum(flat.means_[:, 0] > 0)),
+    ]
+    np.testing.assert_allclose(model.transmat_.sum(axis=1), 1.0)
+    refined = HierarchicalHMMGMRRegressor(
+        manoeuvres=["keep", "change"], n_states=[3, 1], start="flat", random_state=0
+    ).fit(X, y, groups=groups, manoeuvre=labels)
+    proba = refined.predict_manoeuvre_proba(X, groups=groups)
+    assert np.mean(proba.argmax(axis=1) == (labels == "change")) > 0.95
+
+
+def test_a_start_from_the_flat_model_gives_every_manoeuvre_a_state():
+    # one manoeuvre only on few rows: the flat model gives it no state of its own
+    X, y, labels, groups = two_manoeuvres()
+    labels = labels.copy()
+    labels[::97] = "rare"
+    model = HierarchicalHMMGMRRegressor(
+        manoeuvres=["keep", "change", "rare"], n_states=[1, 1, 1], start="flat", random_state=0
+    ).fit(X, y, groups=groups, manoeuvre=labels)
+    assert np.all(model.states_per_manoeuvre_ >= 1)
+    assert model.states_per_manoeuvre_.sum() == 3

@@ -175,7 +175,7 @@ def test_missing_key_is_named(model, key):
         ("standardization.input_scale", [1.0, 0.0, 1.0], "input_scale' must be positive"),
         ("format_version", 3, "'format_version' is 3: the file was written by a newer"),
         ("format_version", 0, "'format_version' is 0; format versions are whole numbers"),
-        ("model_type", "TorquePipeline", "'model_type' is 'TorquePipeline', not 'HMMGMRR"),
+        ("model_type", "TorquePipeline", "'model_type' is 'TorquePipeline', not one of \\["),
         ("training", {"longest_recording": 0}, "'training.longest_recording' must be a pos"),
         ("format", "onnx", "'format' is 'onnx'"),
         ("n_inputs", 0, "'n_inputs' must be a positive integer"),

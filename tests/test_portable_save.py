@@ -209,7 +209,7 @@ def pipeline_dict(data, tmp_path_factory):
         ("format", "onnx", "'format' is 'onnx'"),
         ("steps", [], "'steps' must be a non-empty list"),
         ("steps", ..., "lacks the key 'steps'"),
-        ("steps[0].type", "StandardScaler", "'steps[0].type' is 'StandardScaler', expected 'S"),
+        ("steps[0].type", "StandardScaler", "'steps[0].type' is 'StandardScaler', expected one"),
         ("steps[1].type", "SteeringFeatures", "'steps[1].type' is 'SteeringFeatures', expec"),
         ("steps[0].params.powers", ..., "lacks the key 'steps[0].params.powers'"),
         ("steps[0].params.gain", 2.0, "unknown parameter(s) ['gain']"),
@@ -224,7 +224,7 @@ def pipeline_dict(data, tmp_path_factory):
         ("steps[0].name", "a__b", "'steps[0].name' must be a step name"),
         ("steps[1].name", "steering_features", "names two steps"),
         ("steps[1].model.filter.input_means", ..., "in 'steps[1].model': the model file lacks"),
-        ("steps[1].model.model_type", "Pipeline", "'model_type' is 'Pipeline', not 'HMMGMRR"),
+        ("steps[1].model.model_type", "Pipeline", "'model_type' is 'Pipeline', not one of ["),
         ("training.units", {"speed": "m/s"}, "'training.units' names ['speed']"),
         ("training.when", "today", "'training' holds the unknown key(s) ['when']"),
     ],
@@ -298,3 +298,54 @@ def test_save_refuses_what_a_model_file_does_not_hold(data, tmp_path):
         portable.save(MyRegressor(2, random_state=0).fit(X, y), path)
     assert not path.exists()
     assert TorquePipeline is portable.MODEL_TYPES["TorquePipeline"]
+
+
+def test_the_hierarchical_regressor_and_its_pipeline_round_trip(data, tmp_path, validator):
+    """The subclass is saved as itself (its own ``model_type``), valid under the schema, and
+    loads back as itself: the same estimates, manoeuvre probabilities and structure."""
+    from skhmmgmr import HierarchicalHMMGMRRegressor
+
+    labels = np.where(data["lateral_acceleration"] > 0, "left", "right")
+    groups = data["recording"]
+    model = HierarchicalHMMGMRRegressor(["left", "right"], n_states=[2, 1], random_state=0)
+    model.fit(data[INPUTS], data["driver_torque"], groups=groups, manoeuvre=labels)
+    path = tmp_path / "hierarchy.json"
+    portable.save(model, path)
+    assert schema_errors(validator, path) == []
+    assert json.loads(path.read_text())["model_type"] == "HierarchicalHMMGMRRegressor"
+    restored = portable.load(path)
+    assert type(restored) is HierarchicalHMMGMRRegressor
+    X = data[INPUTS]
+    np.testing.assert_array_equal(
+        restored.predict(X, groups=groups), model.predict(X, groups=groups)
+    )
+    np.testing.assert_array_equal(
+        restored.predict_manoeuvre_proba(X, groups=groups),
+        model.predict_manoeuvre_proba(X, groups=groups),
+    )
+    assert list(restored.manoeuvres_) == ["left", "right"]
+    np.testing.assert_array_equal(restored.states_per_manoeuvre_, [2, 1])
+    # the flat regressor does not read it as one of its own
+    with pytest.raises(ValueError, match="holds a HierarchicalHMMGMRRegressor"):
+        HMMGMRRegressor.from_json(path)
+
+    pipe = Pipeline(
+        [
+            ("derived", SteeringFeatures()),
+            ("model", HierarchicalHMMGMRRegressor(["left", "right"], n_states=1, random_state=0)),
+        ]
+    )
+    pipe.fit(X, data["driver_torque"], model__groups=groups, model__manoeuvre=labels)
+    path = tmp_path / "pipe.json"
+    portable.save(pipe, path)
+    assert schema_errors(validator, path) == []
+    restored = portable.load(path)
+    assert type(restored[-1]) is HierarchicalHMMGMRRegressor
+    np.testing.assert_array_equal(
+        restored.predict(X, groups=groups), pipe.predict(X, groups=groups)
+    )
+    derived = pipe[0].transform(X)
+    np.testing.assert_array_equal(
+        restored[-1].predict_manoeuvre_proba(derived, groups=groups),
+        pipe[-1].predict_manoeuvre_proba(derived, groups=groups),
+    )

@@ -270,6 +270,29 @@ def score_hmm(X, recordings, params):
     return _score(EStepData(X, recordings, params.n_states), params)
 
 
+def state_posteriors(X, recordings, params):
+    """Posterior probabilities of the states at every row given its whole recording
+    (forward-backward), shape (n_samples, n_states)."""
+    engine = EStepData(X, recordings, params.n_states)
+    result = np.empty((engine.data.n_samples, params.n_states))
+    with one_blas_thread():
+        for block, frames, alpha, scale, _ in _forward_blocks(engine, params):
+            start, stop, rec_starts, rec_stops = block
+            posteriors = np.empty((params.n_states, stop - start))
+            backward_posteriors(
+                frames,
+                rec_starts,
+                rec_stops,
+                params.transmat,
+                alpha,
+                scale,
+                posteriors,
+                np.empty_like(frames),
+            )
+            result[start:stop] = posteriors.T
+    return result
+
+
 def _score(engine, params):
     with one_blas_thread():
         density = params.emissions.density(engine.shift)

@@ -28,6 +28,9 @@ FORMAT_NAME = "skhmmgmr-hmm-gmr"
 # 1: 0.1.0, the regressor only; 2: ``model_type`` (the regressor or a pipeline) and ``training``
 FORMAT_VERSION = 2
 REGRESSOR_TYPE = "HMMGMRRegressor"
+# The same file, whose states are the blocks of manoeuvres (``estimator_params`` name them)
+HIERARCHICAL_TYPE = "HierarchicalHMMGMRRegressor"
+REGRESSOR_TYPES = (REGRESSOR_TYPE, HIERARCHICAL_TYPE)
 
 _FILTER_SHAPES = {
     "start_probabilities": ("K",),
@@ -47,13 +50,21 @@ _STANDARDIZATION_SHAPES = {
 _JOINT_SHAPES = {"means": ("K", "D"), "covariances": ("K", "D", "D")}
 
 
-def to_dict(model, *, estimator_params=None, fit_info=None, output_names=None, training=None):
+def to_dict(
+    model,
+    *,
+    estimator_params=None,
+    fit_info=None,
+    output_names=None,
+    training=None,
+    model_type=REGRESSOR_TYPE,
+):
     """JSON-ready dict of a :class:`~skhmmgmr.FittedHMMGMR` (a regressor file of the format
     of :mod:`skhmmgmr.portable`).
 
-    ``estimator_params`` (the estimator's ``get_params()``), ``fit_info`` (log-likelihood,
-    histories, iterations) and ``training`` (facts about the training data, see
-    :func:`read_training`) are stored as given.
+    ``model_type`` is one of :data:`REGRESSOR_TYPES`; ``estimator_params`` (the estimator's
+    ``get_params()``), ``fit_info`` (log-likelihood, histories, iterations) and ``training``
+    (facts about the training data, see :func:`read_training`) are stored as given.
     """
 
     gmr, scaling = model.gmr, model.standardization
@@ -72,7 +83,7 @@ def to_dict(model, *, estimator_params=None, fit_info=None, output_names=None, t
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
         "package_version": __version__,
-        "model_type": REGRESSOR_TYPE,
+        "model_type": model_type,
         "n_states": int(model.n_states),
         "n_inputs": int(n_inputs),
         "n_outputs": int(n_outputs),
@@ -175,6 +186,7 @@ def estimator_to_dict(estimator, *, output_names=None, training=None):
     longest = getattr(estimator, "longest_recording_", None)
     return to_dict(
         estimator.model_,
+        model_type=estimator._portable_type,
         estimator_params=estimator.get_params(),
         fit_info={key: getattr(estimator, key + "_", None) for key in FIT_INFO_KEYS},
         output_names=output_names,
@@ -186,6 +198,12 @@ def estimator_from_dict(cls, data):
     """A fitted estimator of class ``cls`` restored from :func:`to_dict` output: its
     ``from_fitted_model`` with the stored parameters, then the stored fit information."""
     portable = read_model(data)
+    kind = data.get("model_type", REGRESSOR_TYPE)
+    if kind != cls._portable_type:
+        raise ValueError(
+            f"the file holds a {kind} (its 'model_type'), not a {cls._portable_type}: read it "
+            f"with {kind}.from_dict or skhmmgmr.portable.load"
+        )
     try:
         estimator = cls.from_fitted_model(portable.model, **portable.estimator_params)
     except InvalidParameterError as exc:
@@ -226,10 +244,10 @@ def read_model(data):
             f"a portable HMM-GMR model must be a JSON object, got {type(data).__name__}"
         )
     version = read_header(data)
-    if version >= 2 and _require(data, "model_type") != REGRESSOR_TYPE:
+    if version >= 2 and _require(data, "model_type") not in REGRESSOR_TYPES:
         raise ValueError(
-            f"'model_type' is {data['model_type']!r}, not {REGRESSOR_TYPE!r}: a file of a "
-            "pipeline is read by skhmmgmr.portable.load"
+            f"'model_type' is {data['model_type']!r:.100}, not one of {list(REGRESSOR_TYPES)}: "
+            "a file of a pipeline is read by skhmmgmr.portable.load"
         )
     dims = {"K": _count(data, "n_states"), "F": _count(data, "n_inputs")}
     dims["O"] = _count(data, "n_outputs")

@@ -16,13 +16,21 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
-from .._core._compat import Interval, _fit_context
+from .._core._compat import Interval, StrOptions, _fit_context
 from .._core._panel import read_layout
 from .._core._sequences import Recordings
-from .._hmm._em import EMResult, HMMParameters, fit_hmm, score_hmm
-from .._hmm._em_data import Columns
+from .._hmm._em import (
+    EMResult,
+    HMMParameters,
+    e_step,
+    fit_hmm,
+    score_hmm,
+    state_posteriors,
+)
+from .._hmm._em_data import Columns, EStepData
 from .._hmm._emissions import emission_family, make_emissions
 from .._hmm._hierarchy import Hierarchy, HierarchyParts
+from .._hmm._portable import HIERARCHICAL_TYPE
 from ._prediction_inputs import read_joint_inputs
 from ._regressor import HMMGMRRegressor
 
@@ -73,6 +81,18 @@ class HierarchicalHMMGMRRegressor(HMMGMRRegressor):
         EM iterations of the joint refinement after a fit with labels, at most (0: keep the
         parameters read from the labels). A budget: stopping before convergence is not
         warned about.
+    start : {"labels", "flat"}, default="labels"
+        Where the joint EM starts. "labels": every manoeuvre's HMM fitted on its rows, with
+        ``n_states`` states. "flat": the flat HMM-GMR with as many states in total
+        (``sum(n_states)``, fitted as :class:`HMMGMRRegressor` with the same ``random_state``
+        would be), every state given to the manoeuvre whose rows hold most of its posterior
+        probability (a manoeuvre left without one takes the state where its share is
+        largest, from a manoeuvre with several), so that ``states_per_manoeuvre_`` may differ
+        from ``n_states``; the flat model's densities are kept and the hierarchy's
+        transitions estimated from its expected transitions. On the simulator's manoeuvres
+        "flat" predicts the torque as the flat model does, "labels" recognises the
+        manoeuvres earlier (user guide, "Manoeuvres as a hierarchy"). Without labels, the
+        k-means manoeuvres name the states.
     tol : float, default=1e-4
         Convergence threshold on the gain in log-likelihood per row.
     n_init : int, default=1
@@ -138,9 +158,11 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
         "manoeuvres": [Interval(Integral, 1, None, closed="left"), "array-like", None],
         "n_states": [Interval(Integral, 1, None, closed="left"), "array-like", Mapping],
         "refine_iter": [Interval(Integral, 0, None, closed="left")],
+        "start": [StrOptions({"labels", "flat"})],
     }
 
     __metadata_request__fit = {"groups": True, "manoeuvre": True}
+    _portable_type = HIERARCHICAL_TYPE
 
     def __init__(
         self,
@@ -150,6 +172,7 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
         covariance_type="full",
         n_iter=100,
         refine_iter=10,
+        start="labels",
         tol=1e-4,
         n_init=1,
         init_params="kmeans",
@@ -163,6 +186,7 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
         self.covariance_type = covariance_type
         self.n_iter = n_iter
         self.refine_iter = refine_iter
+        self.start = start
         self.tol = tol
         self.n_init = n_init
         self.init_params = init_params
@@ -289,19 +313,82 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
         return self
 
     def _fit_hierarchy(self, columns, recordings, codes, hierarchy):
-        """The EM result of the flat hierarchical HMM on the standardised ``columns``."""
+        """The EM result of the flat hierarchical HMM on the standardised ``columns`` (with
+        ``start="flat"``, the structure is set again to the sizes the flat model gave)."""
         rng = check_random_state(self.random_state)
         if codes is not None:
-            start = self._labelled_start(columns, recordings, codes, hierarchy, rng)
+            start, hierarchy = self._start(columns, recordings, codes, hierarchy, rng)
             return self._joint_em(columns, recordings, start, hierarchy, self.refine_iter)
         best = None
         for _ in range(self.n_init):
             codes = self._kmeans_codes(columns, hierarchy.n_manoeuvres, rng)
-            start = self._labelled_start(columns, recordings, codes, hierarchy, rng)
-            result = self._joint_em(columns, recordings, start, hierarchy, self.n_iter)
+            start, found = self._start(columns, recordings, codes, hierarchy, rng)
+            result = self._joint_em(columns, recordings, start, found, self.n_iter)
             if best is None or result.objective > best.objective:
-                best = result
+                best, sizes = result, found.sizes
+        self._set_structure(list(self.manoeuvres_), sizes)
         return best
+
+    def _start(self, columns, recordings, codes, hierarchy, rng):
+        """``(parameters, hierarchy)`` the joint EM starts from (see ``start``)."""
+        if self.start == "labels":
+            return self._labelled_start(columns, recordings, codes, hierarchy, rng), hierarchy
+        parameters, sizes = self._flat_start(columns, recordings, codes, hierarchy, rng)
+        self._set_structure(list(self.manoeuvres_), sizes)
+        return parameters, self._hierarchy()
+
+    def _flat_start(self, columns, recordings, codes, hierarchy, rng):
+        """The flat HMM of as many states, every state given to the manoeuvre whose rows hold
+        most of its posterior probability (every manoeuvre at least one state, taken from
+        the manoeuvre with the most states where it has the largest share), the states
+        ordered by manoeuvre and the transitions of the hierarchy estimated from them (one
+        M-step of the parts). Returns ``(parameters, sizes)``."""
+        n_manoeuvres, total = hierarchy.n_manoeuvres, hierarchy.n_states
+        flat = self._fit_states(columns, recordings, total, rng).parameters
+        posteriors = state_posteriors(_copy(columns), recordings, flat)
+        mass = np.zeros((n_manoeuvres, total))
+        np.add.at(mass, codes, posteriors)
+        owner = mass.argmax(axis=0)
+        for m in range(n_manoeuvres):
+            if np.any(owner == m):
+                continue
+            counts = np.bincount(owner, minlength=n_manoeuvres)
+            free = np.flatnonzero(counts[owner] > 1)
+            share = mass[m, free] / np.maximum(mass[:, free].sum(axis=0), np.finfo(float).tiny)
+            owner[free[np.argmax(share)]] = m
+        order = np.argsort(owner, kind="stable")
+        sizes = np.bincount(owner, minlength=n_manoeuvres)
+        emissions = flat.emissions
+        covariances = emissions.covariances
+        if self.covariance_type != "tied":
+            covariances = covariances[order]
+        permuted = HMMParameters(
+            flat.startprob[order],
+            flat.transmat[np.ix_(order, order)],
+            make_emissions(self.covariance_type, emissions.means[order], covariances),
+        )
+        structure = Hierarchy(sizes)
+        stats = e_step(EStepData(_copy(columns), recordings, total), permuted)
+        startprob, transmat = structure.maximize(
+            stats.start_counts, stats.transition_counts, permuted
+        )
+        return HMMParameters(startprob, transmat, permuted.emissions), sizes
+
+    def _fit_states(self, columns, recordings, n_states, rng):
+        """An unstructured HMM of ``n_states`` on ``columns``, with the estimator's EM
+        settings (the :class:`EMResult`)."""
+        return fit_hmm(
+            columns,
+            recordings,
+            n_states,
+            n_init=self.n_init,
+            init_params=self.init_params,
+            n_iter=self.n_iter,
+            tol=self.tol,
+            reg_covar=self.reg_covar,
+            random_state=rng,
+            covariance_type=self.covariance_type,
+        )
 
     def _joint_em(self, columns, recordings, start, hierarchy, n_iter):
         if n_iter == 0:
@@ -361,18 +448,8 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
             block = Recordings(ids=np.arange(len(mine)), starts=bounds[:-1], stops=bounds[1:])
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ConvergenceWarning)
-                result = fit_hmm(
-                    Columns(columns.values[:, rows], columns.shift),
-                    block,
-                    size,
-                    n_init=self.n_init,
-                    init_params=self.init_params,
-                    n_iter=self.n_iter,
-                    tol=self.tol,
-                    reg_covar=self.reg_covar,
-                    random_state=rng,
-                    covariance_type=self.covariance_type,
-                )
+                rows_of_m = Columns(columns.values[:, rows], columns.shift)
+                result = self._fit_states(rows_of_m, block, size, rng)
             params = result.parameters
             span = hierarchy.block(m)
             within[span, span] = params.transmat
@@ -522,6 +599,11 @@ def _codes(labels, names, X, groups, time):
     if unknown:
         raise ValueError(f"manoeuvre holds the label(s) {unknown}, not among manoeuvres={names}")
     return np.fromiter((index[_plain(v)] for v in labels), dtype=np.intp, count=len(labels))
+
+
+def _copy(columns):
+    """Columns the engine may change in place (it zeroes missing values)."""
+    return Columns(columns.values.copy(), columns.shift)
 
 
 def _n_rows(X):

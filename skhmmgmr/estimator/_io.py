@@ -12,6 +12,7 @@ import numpy as np
 from .._core._compat import validate_parameter_constraints
 from .._hmm._hmmlearn import estimator_from_hmmlearn, estimator_to_hmmlearn
 from .._hmm._portable import (
+    REGRESSOR_TYPE,
     estimator_from_dict,
     estimator_from_json,
     estimator_to_dict,
@@ -22,6 +23,9 @@ from ..streaming import FilterStream
 
 class ModelIOMixin:
     """Builds an estimator around a :class:`~skhmmgmr.FittedHMMGMR` and reads it out."""
+
+    # ``model_type`` of the estimator's portable model file
+    _portable_type = REGRESSOR_TYPE
 
     @classmethod
     def from_fitted_model(cls, model, **params):

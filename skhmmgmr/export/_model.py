@@ -120,7 +120,11 @@ def _steps(fitted):
             f"HMMGMRRegressor (make_torque_pipeline); got {type(fitted).__name__}."
         )
     steps = [(name, step) for name, step in fitted.steps if step not in (None, "passthrough")]
-    kinds = [type(step) for _, step in steps]
+    # the regressor may be a subclass (HierarchicalHMMGMRRegressor: its model_ is a flat
+    # HMM-GMR over all its states, exported as any other)
+    kinds = [
+        HMMGMRRegressor if isinstance(step, HMMGMRRegressor) else type(step) for _, step in steps
+    ]
     if kinds not in ([HMMGMRRegressor], [SteeringFeatures, HMMGMRRegressor]):
         unsupported = [
             f"{name!r} ({type(step).__name__})"
