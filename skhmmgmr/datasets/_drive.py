@@ -169,7 +169,6 @@ def drive(
     errors = None if scale is None else draw_errors(section.n_samples, dt, scale, section.rng)
     sensors = SensorStream(FEATURE_NAMES, errors, dt, section.speed, scale)
     sensed = np.empty((section.n_samples, len(FEATURE_NAMES)))
-    torques = np.empty(section.n_samples)
 
     def torque_source(row, states):
         log = np.array([(*states, 0.0)])
@@ -181,18 +180,19 @@ def drive(
             torque = torque_of(view)
         finally:
             view.flags.writeable = True
-        torque = _as_torque(torque, name, row / sampling_rate)
-        torques[row] = sensors.torque(row, torque)
-        return torque
+        return _as_torque(torque, name, row / sampling_rate)
 
     log = section.simulate(torque_source)
     n_driven = log.shape[0]
+    # the torque sensor reads the log's torque: the driver's own with a rigid column, the
+    # torsion bar's with a compliant one
+    torques = np.array([sensors.torque(i, value) for i, value in enumerate(log[:, 13].tolist())])
     if recording is None:
         recording = f"{name}-{scenario}-s{setting}"
     frame = section.frame(
         log,
         dict(zip(FEATURE_NAMES, sensed[:n_driven].T, strict=True)),
-        torques[:n_driven],
+        torques,
         recording=recording,
         driver=name,
         split=split,

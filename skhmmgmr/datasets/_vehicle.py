@@ -83,6 +83,9 @@ class VehicleParameters:
     assist_gain_slope: float = 0.15  # [1/Nm] boost curve g_1
     assist_max: float = 6.0  # [Nm] assist saturation (at the wheel)
     sensor_noise: float = 1.0  # [-] scale of the sensor errors of this car's sensor set
+    column_stiffness: float = math.inf  # [Nm/rad] torsion bar (inf: rigid column)
+    column_damping: float = 0.1  # [Nms/rad] torsion bar damping (with a finite stiffness)
+    steering_wheel_share: float = 0.5  # [-] share of wheel_inertia above the torsion bar
 
     @property
     def wheelbase(self):
@@ -150,6 +153,14 @@ VEHICLE_RANGES = {
     "mechanical_trail": (0.01, 0.035, "m", "caster trail of the front wheels"),
     "pneumatic_trail": (0.02, 0.045, "m", "pneumatic trail of the front tyres at zero slip"),
     "sensor_noise": (0.5, 2.0, "-", "scale of every sensor error (1: typical)"),
+    # drawn last, so that the parameters above are those drawn before the column was compliant
+    "column_stiffness": (
+        1.0 / math.radians(1.0),
+        3.0 / math.radians(1.0),
+        "Nm/rad",
+        "torsion bar stiffness (1-3 Nm/deg); the reference car's column is rigid (inf)",
+    ),
+    "column_damping": (0.05, 0.3, "Nms/rad", "damping of the torsion bar's twist"),
 }
 
 
@@ -212,14 +223,23 @@ def check_vehicle(vehicle):
         if (
             isinstance(value, bool)
             or not isinstance(value, numbers.Real)
-            or not math.isfinite(value)
+            or math.isnan(value)
+            or (math.isinf(value) and name != "column_stiffness")
             or value < 0
             or (value == 0 and name not in _MAY_BE_ZERO)
         ):
-            least = "non-negative" if name in _MAY_BE_ZERO else "positive"
-            raise ValueError(
-                f"vehicle parameter {name} must be a finite {least} number, got {name}={value!r}."
-            )
+            if name == "column_stiffness":
+                what = "a positive number (math.inf: a rigid column)"
+            else:
+                least = "non-negative" if name in _MAY_BE_ZERO else "positive"
+                what = f"a finite {least} number"
+            raise ValueError(f"vehicle parameter {name} must be {what}, got {name}={value!r}.")
+    if not vehicle.steering_wheel_share < 1.0:
+        raise ValueError(
+            "vehicle parameter steering_wheel_share must be below 1 (the lower column and the "
+            "rack keep some inertia), got "
+            f"steering_wheel_share={vehicle.steering_wheel_share!r}."
+        )
     return vehicle
 
 
@@ -232,4 +252,5 @@ _MAY_BE_ZERO = {
     "pneumatic_trail",
     "sensor_noise",
     "roll_damping",
+    "column_damping",
 }
