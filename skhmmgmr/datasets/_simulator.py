@@ -77,8 +77,13 @@ def _simulate(
     ``torque_source``: another driver than the human of ``driver``, called at every logged
     sample as ``torque_source(row, states)`` with the states of the logged columns but the
     torque (the steering-wheel acceleration of the integration step before); its torque acts
-    at the torsion bar until the next sample. It may lose control: the log then ends at the
+    at the steering wheel until the next sample. It may lose control: the log then ends at the
     sample where the lateral deviation first exceeds :data:`LOST_CONTROL`.
+
+    The logged torque is the torque sensor's: the driver's (the human's, or the torque
+    source's) with a rigid column; the torsion bar's ``k_c (theta - theta_c) + c_c (theta' -
+    theta_c')`` at the sample with a ``column_stiffness``, ``theta_c`` being the lower
+    column's angle (see :mod:`._vehicle`).
     """
     n_steps = n_samples * n_sub
     u = speed

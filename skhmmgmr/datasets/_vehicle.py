@@ -13,13 +13,37 @@ driven by the lateral acceleration::
     I_z dr/dt = l_f F_f - l_r F_r                   alpha_r = -(v - l_r r) / u
     I_x d2phi/dt2 = m_s h a_y - (k_phi - m_s g h) phi - c_phi dphi/dt
 
-Steering system: rigid column of ratio ``i_s`` (``delta = theta / i_s``), wheel inertia and
-damping, Coulomb friction, an electric power assist ``T_a = T_d (g_0 + g_1 |T_d|)`` (boost
-curve, capped; its bandwidth is far above the driver's, so it acts without lag) and the
-self-aligning torque of the front tyres ``F_f (t_m + t_p(alpha_f))`` (mechanical plus pneumatic
-trail, the latter fading with slip)::
+Steering system: column of ratio ``i_s``, wheel inertia and damping, Coulomb friction
+``T_fric = F_c tanh(omega / omega_c)``, an electric power assist ``T_a = T (g_0 + g_1 |T|)``
+of the sensed torque ``T`` (boost curve, capped at ``T_a,max``; its bandwidth is far above the
+driver's, so it acts without lag) and the self-aligning torque of the front tyres
+``F_f (t_m + t_p(alpha_f))`` (mechanical plus pneumatic trail, the latter fading with slip).
+
+The reference car's column is rigid (``column_stiffness=inf``): ``delta = theta / i_s`` and the
+torque sensor reads the driver's torque at the wheel, ``T = T_d``::
 
     J_sw d2theta/dt2 = T_d + T_a - F_f (t_m + t_p) / i_s - b_sw dtheta/dt - T_fric
+
+A finite ``column_stiffness`` ``k_c`` puts a torsion bar (damping ``c_c``) between the
+steering wheel (angle ``theta``, the share ``s`` of ``J_sw`` above the bar) and the lower column
+carrying the rack (angle ``theta_c`` in steering-wheel units, ``delta = theta_c / i_s``, the
+rest of ``J_sw``), as in an electric power steering: the torque sensor reads the torsion bar,
+``T = T_bar = k_c (theta - theta_c) + c_c (dtheta/dt - dtheta_c/dt)``, the assist boosts it at
+the lower column, and the friction and the damping act there::
+
+    s J_sw d2theta/dt2 = T_d - T_bar
+    (1 - s) J_sw d2theta_c/dt2 = T_bar + T_a - F_f (t_m + t_p) / i_s - b_sw dtheta_c/dt - T_fric
+
+``driver_torque`` is the torque sensor's reading, ``T_bar``: in steady state the driver's
+torque, while the wheel accelerates the driver's torque minus ``s J_sw d2theta/dt2``. Held at
+a constant torque, the bar twists by ``theta - theta_c = T_d / k_c``. The column's natural
+frequency ``sqrt(k_c (1 / (s J_sw + J_arm) + (1 + gain) / ((1 - s) J_sw)))`` (the assist's
+local gain, up to 2.6, stiffens the lower side) is 50 to 250 rad/s (8 to 40 Hz) over the
+drawn ranges, above the driver's bandwidth, and ``omega dt`` reaches 1.25 at the internal rate
+of 200 Hz: the simulator
+steps the column by linearised backward Euler (stable at any step, damping the column's mode
+somewhat more than its own ``c_c`` does). The driver's arms (and a model at the wheel,
+:func:`drive`, which has none) act on the steering wheel.
 """
 
 import math
@@ -44,10 +68,15 @@ class VehicleParameters:
     The virtual driver knows the car it drives: its internal model of the steering gain, of the
     aligning torque and of the power assist is the vehicle's.
 
-    The steering column is rigid (the torque sensor reads the driver's torque at the wheel);
-    ``wheel_damping`` is the column's viscous damping and ``wheel_friction`` its Coulomb
-    friction, smoothed over ``friction_velocity``. ``sensor_noise`` scales the sensor errors of
-    the simulator's ``sensor_noise`` argument (the car's sensor set: 1 is "typical").
+    The reference car's steering column is rigid (``column_stiffness=inf``: the torque sensor
+    reads the driver's torque at the wheel); a finite ``column_stiffness`` is a torsion bar
+    with ``column_damping``, with the share ``steering_wheel_share`` of ``wheel_inertia``
+    above it and the rest (lower column, reflected rack) below it, the torque sensor reading
+    the bar (the equations are in the module's documentation and in the user guide).
+    ``wheel_damping`` is the steering's viscous damping and ``wheel_friction`` its Coulomb
+    friction, smoothed over ``friction_velocity``, at the lower column with a torsion bar.
+    ``sensor_noise`` scales the sensor errors of the simulator's ``sensor_noise`` argument
+    (the car's sensor set: 1 is "typical").
 
     Examples
     --------
@@ -135,7 +164,8 @@ class VehicleParameters:
 
 #: What :func:`draw_vehicle` draws, uniformly within ``(low, high)``: parameter name of
 #: :class:`VehicleParameters` -> ``(low, high, unit, meaning)``. Every range holds the default
-#: car's value. The other parameters (mass, tyres, roll...) stay the default car's.
+#: car's value but ``column_stiffness`` (the default column is rigid, a drawn car has a
+#: torsion bar). The other parameters (mass, tyres, roll...) stay the default car's.
 VEHICLE_RANGES = {
     "wheel_friction": (0.1, 0.8, "Nm", "Coulomb friction of the steering system at the wheel"),
     "friction_velocity": (
