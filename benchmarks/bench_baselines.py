@@ -27,10 +27,10 @@ boosting baseline. Run with::
     python benchmarks/bench_baselines.py --quick               # 1-minute recordings
 
 ``--vehicles default 0 1 2`` runs the whole bench in every car given (``default``: the
-simulator's reference car; an int: the car ``draw_vehicle`` draws from it, the steering
-system drawn within ``VEHICLE_RANGES``) and ends with the spread over the cars: per rate and
-model, the mean accuracy and roughness in each car (over the seeds), their lowest and highest,
-and the pipeline's margin over boosting in each car.
+simulator's reference car, rigid column; an int: the car ``draw_vehicle`` draws from it, the
+steering system, torsion bar included, drawn within ``VEHICLE_RANGES``) and ends with the
+spread over the cars: per rate and model, the mean accuracy and roughness in each car (over
+the seeds), their lowest and highest, and the pipeline's margin over boosting in each car.
 
 ``--output results.json`` saves every per-recording figure. ``--residuals`` prints instead
 why the thesis' model loses: the mean test residual of ``HMMGMRRegressor`` (K=5, 18 features)
@@ -41,6 +41,7 @@ seed and rate).
 
 import argparse
 import json
+import math
 import time
 import warnings
 
@@ -291,7 +292,13 @@ def describe_cars(vehicles):
             f"{car.assist_gain_slope:.2f}/Nm (max {car.assist_max:.1f} Nm), damping "
             f"{car.wheel_damping:.2f} Nms/rad, inertia {car.wheel_inertia:.3f} kg m^2, ratio "
             f"{car.steering_ratio:.1f}, trails {car.mechanical_trail * 1e3:.0f}+"
-            f"{car.pneumatic_trail * 1e3:.0f} mm, sensor noise x{car.sensor_noise:.2f}"
+            f"{car.pneumatic_trail * 1e3:.0f} mm, sensor noise x{car.sensor_noise:.2f}, "
+            + (
+                f"torsion bar {math.radians(car.column_stiffness):.2f} Nm/deg "
+                f"({car.column_damping:.2f} Nms/rad)"
+                if math.isfinite(car.column_stiffness)
+                else "rigid column"
+            )
         )
 
 

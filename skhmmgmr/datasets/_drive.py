@@ -46,7 +46,7 @@ def drive(
     The closed loop of :func:`make_lane_keeping` (road, steering system with power assist,
     single-track vehicle) with ``driver`` steering. A model drives on what the logger records:
     at every sample it gets the 18 sensed features (with the sensor errors of
-    ``sensor_noise``), and its torque acts at the torsion bar until the next sample, as a
+    ``sensor_noise``), and its torque acts at the steering wheel until the next sample, as a
     torque feedback actuator would apply it. Same seeds, same road, same manoeuvres and same
     sensor errors for every driver, so that runs compare row by row with the human's.
 
@@ -83,9 +83,11 @@ def drive(
     -------
     frame : pandas.DataFrame
         The frame of :func:`make_lane_keeping`: ``recording, driver, setting, split, time``,
-        the 18 sensed features as the model got them, and ``driver_torque``, the driver's
-        torque as the torque sensor reads it. A model that loses control (lateral deviation
-        beyond 10 m) ends the drive there: the frame is shorter, and
+        the 18 sensed features as the model got them, and ``driver_torque``, the torque
+        sensor's reading: the driver's torque with a rigid column, the torsion bar's torque
+        in a car with a ``column_stiffness`` (see :class:`VehicleParameters`). A model that
+        loses control (lateral deviation beyond 10 m) ends the drive there: the frame is
+        shorter, and
         ``frame.attrs["lost_control"]`` holds the time [s] (``None`` otherwise).
 
     See Also
@@ -104,8 +106,10 @@ def drive(
 
     With clean sensors (``sensor_noise=None``) the steering-wheel acceleration a model gets
     is that of the integration step before the sample (this step's depends on its own
-    torque). A model has no arm impedance: it imposes the torque measured by the torque
-    sensor, where a human's arms add stiffness, damping and inertia to the steering wheel.
+    torque). A model has no arm impedance: it imposes its torque on the steering wheel,
+    where a human's arms add stiffness, damping and inertia. With a rigid column that is the
+    torque the sensor reads; with a torsion bar the sensor reads the bar, which differs from
+    the model's torque by the steering wheel's inertia torque while the wheel accelerates.
 
     Examples
     --------
@@ -169,7 +173,6 @@ def drive(
     errors = None if scale is None else draw_errors(section.n_samples, dt, scale, section.rng)
     sensors = SensorStream(FEATURE_NAMES, errors, dt, section.speed, scale)
     sensed = np.empty((section.n_samples, len(FEATURE_NAMES)))
-    torques = np.empty(section.n_samples)
 
     def torque_source(row, states):
         sensed[row] = sense(section, sensors, row, states)
@@ -179,18 +182,19 @@ def drive(
             torque = torque_of(view)
         finally:
             view.flags.writeable = True
-        torque = _as_torque(torque, name, row / sampling_rate)
-        torques[row] = sensors.torque(row, torque)
-        return torque
+        return _as_torque(torque, name, row / sampling_rate)
 
     log = section.simulate(torque_source)
     n_driven = log.shape[0]
+    # the torque sensor reads the log's torque: the driver's own with a rigid column, the
+    # torsion bar's with a compliant one
+    torques = np.array([sensors.torque(i, value) for i, value in enumerate(log[:, 13].tolist())])
     if recording is None:
         recording = f"{name}-{scenario}-s{setting}"
     frame = section.frame(
         log,
         dict(zip(FEATURE_NAMES, sensed[:n_driven].T, strict=True)),
-        torques[:n_driven],
+        torques,
         recording=recording,
         driver=name,
         split=split,

@@ -87,12 +87,18 @@ def _simulate(
     ``torque_source``: another driver than the human of ``driver``, called at every logged
     sample as ``torque_source(row, states)`` with the states of the logged columns but the
     torque (the steering-wheel acceleration of the integration step before); its torque acts
-    at the torsion bar until the next sample. It may lose control: the log then ends at the
+    at the steering wheel until the next sample. It may lose control: the log then ends at the
     sample where the lateral deviation first exceeds :data:`LOST_CONTROL`.
 
     ``initial`` (with a ``torque_source`` only): start from a logged state instead of rest,
     ``(theta, theta_d, theta_dd, v, r, phi, phi_d, s, e_y, e_psi, t_driver)`` with the driver
-    torque of the integration step before (which sets the power assist's gain).
+    torque of the integration step before (which sets the power assist's gain). With a torsion
+    bar the lower column starts at the bar's static twist under that torque, turning with the
+    wheel (the log holds no column state).
+    The logged torque is the torque sensor's: the driver's (the human's, or the torque
+    source's) with a rigid column; the torsion bar's ``k_c (theta - theta_c) + c_c (theta' -
+    theta_c')`` at the sample with a ``column_stiffness``, ``theta_c`` being the lower
+    column's angle (see :mod:`._vehicle`).
     """
     n_steps = n_samples * n_sub
     u = speed
@@ -116,6 +122,12 @@ def _simulate(
     if torque_source is not None:
         j_arm = b_arm = 0.0
     j_sw = vehicle.wheel_inertia
+    # torsion bar: a finite column stiffness splits the steering into two inertias (see
+    # _vehicle); the rigid column (column_stiffness=inf) keeps the one-inertia step below
+    compliant = math.isfinite(vehicle.column_stiffness)
+    k_col, c_col = vehicle.column_stiffness, vehicle.column_damping
+    j_up = vehicle.steering_wheel_share * j_sw
+    j_low = j_sw - j_up
     # explicit Euler on the steering's velocity terms is stable for dt * slope / inertia < 2;
     # a car past STIFF_STEP (stiff damping, narrow friction band, light wheel) steps them
     # implicitly (the reference car, at 0.41 for 200 Hz, does not)
@@ -149,11 +161,17 @@ def _simulate(
     tanh, sin, cos, sqrt = math.tanh, math.sin, math.cos, math.sqrt
     s = e_y = e_psi = s_d = e_y_d = e_psi_d = 0.0
     theta = theta_d = theta_dd = v = r = phi = phi_d = 0.0
+    theta_c = theta_c_d = 0.0  # lower column (below the torsion bar), in steering-wheel angle
     t_muscle = t_driver = theta_des = 0.0
     if initial is not None:
         if torque_source is None:
             raise ValueError("initial needs a torque_source (a human starts at rest)")
         theta, theta_d, theta_dd, v, r, phi, phi_d, s, e_y, e_psi, t_driver = map(float, initial)
+        if compliant:
+            # The log holds no lower-column state: take the torsion bar's static twist under
+            # the logged torque, turning with the wheel (exact at rest, an approximation when
+            # the column twists dynamically).
+            theta_c, theta_c_d = theta - t_driver / k_col, theta_d
     delay_line = [0.0] * n_delay
     log = np.empty((n_samples, 14))
     row = 0
@@ -203,7 +221,7 @@ def _simulate(
         kappa = curv[i] + (x - i) * (curv[i + 1] - curv[i])
 
         # tyres, aligning torque, vehicle (none of which depends on this step's torque)
-        alpha_f = theta / ratio - (v + lf * r) / u
+        alpha_f = (theta_c if compliant else theta) / ratio - (v + lf * r) / u
         alpha_r = (lr * r - v) / u
         force_f = f_max * tanh(cf * alpha_f / f_max)
         force_r = r_max * tanh(cr * alpha_r / r_max)
@@ -214,30 +232,54 @@ def _simulate(
         phi_dd = (ms_h * a_y - k_roll * phi - c_roll * phi_d) / ix
         s_d = (u * cos(e_psi) - v * sin(e_psi)) / (1.0 - kappa * e_y)
         e_y_d = u * sin(e_psi) + v * cos(e_psi)
+        if compliant:  # the torque sensor reads the torsion bar
+            t_driver = k_col * (theta - theta_c) + c_col * (theta_d - theta_c_d)
         if torque_source is not None and sample:
             states = (theta, theta_d, theta_dd, v, a_y, r, r_d, phi, phi_d, phi_dd, s, e_y, e_psi)
             t_hand = torque_source(row, states)
-            log[row] = (*states, t_hand)
+            log[row] = (*states, t_driver if compliant else t_hand)
             row += 1
 
-        # power assist (sensing last step's driver torque).
+        # power assist (sensing last step's driver torque, or this step's torsion bar torque).
         # The boost gain is frozen at last step's torque, which makes the rigid-column balance
         # J_sw theta'' = (1 + gain) T_d - loads, with T_d = T_hand - B theta' - J_arm theta'',
         # linear in theta'' (a lagged assist would feed back the arm inertia and oscillate).
         gain = g0 + g1 * abs(t_driver)
         if gain * abs(t_driver) > a_max:
             gain = a_max / abs(t_driver)
-        t_arm = t_hand - b_arm * theta_d
-        sticking = tanh(theta_d / fric_v)
-        loads = force_f * trail / ratio + b_sw * theta_d + fric * sticking
-        if stiff:
-            # linearised backward Euler on the velocity terms (damping, friction): stable
-            # whatever the friction's slope fric / fric_v against the inertia
-            slope = b_sw + (1.0 + gain) * b_arm + fric / fric_v * (1.0 - sticking * sticking)
-            theta_dd = ((1.0 + gain) * t_arm - loads) / (j_sw + (1.0 + gain) * j_arm + dt * slope)
+        if compliant:
+            # Two-inertia column (see _vehicle), the assist boosting the torsion bar torque:
+            #   (J_up + J_arm) theta'' = T_hand - B theta' - T_bar
+            #   J_low theta_c'' = (1 + gain) T_bar - aligning - b_sw theta_c' - T_fric
+            # stepped by linearised backward Euler on the torsion bar and the velocity terms
+            # (stable whatever the column's natural frequency against dt): T_bar at the step's
+            # end is t_next + k_e (theta'' - theta_c'').
+            sticking = tanh(theta_c_d / fric_v)
+            k_e = (k_col * dt + c_col) * dt
+            t_next = t_driver + k_col * dt * (theta_d - theta_c_d)
+            r_up = t_hand - b_arm * theta_d - t_next
+            r_low = (1.0 + gain) * t_next - force_f * trail / ratio - b_sw * theta_c_d
+            r_low -= fric * sticking
+            m_up = j_up + j_arm + b_arm * dt + k_e
+            m_low = j_low + (1.0 + gain) * k_e + dt * (b_sw + fric / fric_v * (1.0 - sticking**2))
+            det = m_up * m_low - (1.0 + gain) * k_e * k_e
+            theta_dd = (m_low * r_up + k_e * r_low) / det
+            theta_c_d += dt * (m_up * r_low + (1.0 + gain) * k_e * r_up) / det
+            theta_c += dt * theta_c_d
         else:
-            theta_dd = ((1.0 + gain) * t_arm - loads) / (j_sw + (1.0 + gain) * j_arm)
-        t_driver = t_arm - j_arm * theta_dd
+            t_arm = t_hand - b_arm * theta_d
+            sticking = tanh(theta_d / fric_v)
+            loads = force_f * trail / ratio + b_sw * theta_d + fric * sticking
+            if stiff:
+                # linearised backward Euler on the velocity terms (damping, friction): stable
+                # whatever the friction's slope fric / fric_v against the inertia
+                slope = b_sw + (1.0 + gain) * b_arm + fric / fric_v * (1.0 - sticking * sticking)
+                theta_dd = ((1.0 + gain) * t_arm - loads) / (
+                    j_sw + (1.0 + gain) * j_arm + dt * slope
+                )
+            else:
+                theta_dd = ((1.0 + gain) * t_arm - loads) / (j_sw + (1.0 + gain) * j_arm)
+            t_driver = t_arm - j_arm * theta_dd
 
         if torque_source is None and sample:
             log[row] = (

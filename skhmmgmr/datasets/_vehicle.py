@@ -13,13 +13,37 @@ driven by the lateral acceleration::
     I_z dr/dt = l_f F_f - l_r F_r                   alpha_r = -(v - l_r r) / u
     I_x d2phi/dt2 = m_s h a_y - (k_phi - m_s g h) phi - c_phi dphi/dt
 
-Steering system: rigid column of ratio ``i_s`` (``delta = theta / i_s``), wheel inertia and
-damping, Coulomb friction, an electric power assist ``T_a = T_d (g_0 + g_1 |T_d|)`` (boost
-curve, capped; its bandwidth is far above the driver's, so it acts without lag) and the
-self-aligning torque of the front tyres ``F_f (t_m + t_p(alpha_f))`` (mechanical plus pneumatic
-trail, the latter fading with slip)::
+Steering system: column of ratio ``i_s``, wheel inertia and damping, Coulomb friction
+``T_fric = F_c tanh(omega / omega_c)``, an electric power assist ``T_a = T (g_0 + g_1 |T|)``
+of the sensed torque ``T`` (boost curve, capped at ``T_a,max``; its bandwidth is far above the
+driver's, so it acts without lag) and the self-aligning torque of the front tyres
+``F_f (t_m + t_p(alpha_f))`` (mechanical plus pneumatic trail, the latter fading with slip).
+
+The reference car's column is rigid (``column_stiffness=inf``): ``delta = theta / i_s`` and the
+torque sensor reads the driver's torque at the wheel, ``T = T_d``::
 
     J_sw d2theta/dt2 = T_d + T_a - F_f (t_m + t_p) / i_s - b_sw dtheta/dt - T_fric
+
+A finite ``column_stiffness`` ``k_c`` puts a torsion bar (damping ``c_c``) between the
+steering wheel (angle ``theta``, the share ``s`` of ``J_sw`` above the bar) and the lower column
+carrying the rack (angle ``theta_c`` in steering-wheel units, ``delta = theta_c / i_s``, the
+rest of ``J_sw``), as in an electric power steering: the torque sensor reads the torsion bar,
+``T = T_bar = k_c (theta - theta_c) + c_c (dtheta/dt - dtheta_c/dt)``, the assist boosts it at
+the lower column, and the friction and the damping act there::
+
+    s J_sw d2theta/dt2 = T_d - T_bar
+    (1 - s) J_sw d2theta_c/dt2 = T_bar + T_a - F_f (t_m + t_p) / i_s - b_sw dtheta_c/dt - T_fric
+
+``driver_torque`` is the torque sensor's reading, ``T_bar``: in steady state the driver's
+torque, while the wheel accelerates the driver's torque minus ``s J_sw d2theta/dt2``. Held at
+a constant torque, the bar twists by ``theta - theta_c = T_d / k_c``. The column's natural
+frequency ``sqrt(k_c (1 / (s J_sw + J_arm) + (1 + gain) / ((1 - s) J_sw)))`` (the assist's
+local gain, up to 2.6, stiffens the lower side) is 50 to 250 rad/s (8 to 40 Hz) over the
+drawn ranges, above the driver's bandwidth, and ``omega dt`` reaches 1.25 at the internal rate
+of 200 Hz: the simulator
+steps the column by linearised backward Euler (stable at any step, damping the column's mode
+somewhat more than its own ``c_c`` does). The driver's arms (and a model at the wheel,
+:func:`drive`, which has none) act on the steering wheel.
 """
 
 import math
@@ -44,10 +68,15 @@ class VehicleParameters:
     The virtual driver knows the car it drives: its internal model of the steering gain, of the
     aligning torque and of the power assist is the vehicle's.
 
-    The steering column is rigid (the torque sensor reads the driver's torque at the wheel);
-    ``wheel_damping`` is the column's viscous damping and ``wheel_friction`` its Coulomb
-    friction, smoothed over ``friction_velocity``. ``sensor_noise`` scales the sensor errors of
-    the simulator's ``sensor_noise`` argument (the car's sensor set: 1 is "typical").
+    The reference car's steering column is rigid (``column_stiffness=inf``: the torque sensor
+    reads the driver's torque at the wheel); a finite ``column_stiffness`` is a torsion bar
+    with ``column_damping``, with the share ``steering_wheel_share`` of ``wheel_inertia``
+    above it and the rest (lower column, reflected rack) below it, the torque sensor reading
+    the bar (the equations are in the module's documentation and in the user guide).
+    ``wheel_damping`` is the steering's viscous damping and ``wheel_friction`` its Coulomb
+    friction, smoothed over ``friction_velocity``, at the lower column with a torsion bar.
+    ``sensor_noise`` scales the sensor errors of the simulator's ``sensor_noise`` argument
+    (the car's sensor set: 1 is "typical").
 
     Examples
     --------
@@ -83,6 +112,9 @@ class VehicleParameters:
     assist_gain_slope: float = 0.15  # [1/Nm] boost curve g_1
     assist_max: float = 6.0  # [Nm] assist saturation (at the wheel)
     sensor_noise: float = 1.0  # [-] scale of the sensor errors of this car's sensor set
+    column_stiffness: float = math.inf  # [Nm/rad] torsion bar (inf: rigid column)
+    column_damping: float = 0.1  # [Nms/rad] torsion bar damping (with a finite stiffness)
+    steering_wheel_share: float = 0.5  # [-] share of wheel_inertia above the torsion bar
 
     @property
     def wheelbase(self):
@@ -132,7 +164,8 @@ class VehicleParameters:
 
 #: What :func:`draw_vehicle` draws, uniformly within ``(low, high)``: parameter name of
 #: :class:`VehicleParameters` -> ``(low, high, unit, meaning)``. Every range holds the default
-#: car's value. The other parameters (mass, tyres, roll...) stay the default car's.
+#: car's value but ``column_stiffness`` (the default column is rigid, a drawn car has a
+#: torsion bar). The other parameters (mass, tyres, roll...) stay the default car's.
 VEHICLE_RANGES = {
     "wheel_friction": (0.1, 0.8, "Nm", "Coulomb friction of the steering system at the wheel"),
     "friction_velocity": (
@@ -150,6 +183,14 @@ VEHICLE_RANGES = {
     "mechanical_trail": (0.01, 0.035, "m", "caster trail of the front wheels"),
     "pneumatic_trail": (0.02, 0.045, "m", "pneumatic trail of the front tyres at zero slip"),
     "sensor_noise": (0.5, 2.0, "-", "scale of every sensor error (1: typical)"),
+    # drawn last, so that the parameters above are those drawn before the column was compliant
+    "column_stiffness": (
+        1.0 / math.radians(1.0),
+        3.0 / math.radians(1.0),
+        "Nm/rad",
+        "torsion bar stiffness (1-3 Nm/deg); the reference car's column is rigid (inf)",
+    ),
+    "column_damping": (0.05, 0.3, "Nms/rad", "damping of the torsion bar's twist"),
 }
 
 
@@ -212,14 +253,23 @@ def check_vehicle(vehicle):
         if (
             isinstance(value, bool)
             or not isinstance(value, numbers.Real)
-            or not math.isfinite(value)
+            or math.isnan(value)
+            or (math.isinf(value) and name != "column_stiffness")
             or value < 0
             or (value == 0 and name not in _MAY_BE_ZERO)
         ):
-            least = "non-negative" if name in _MAY_BE_ZERO else "positive"
-            raise ValueError(
-                f"vehicle parameter {name} must be a finite {least} number, got {name}={value!r}."
-            )
+            if name == "column_stiffness":
+                what = "a positive number (math.inf: a rigid column)"
+            else:
+                least = "non-negative" if name in _MAY_BE_ZERO else "positive"
+                what = f"a finite {least} number"
+            raise ValueError(f"vehicle parameter {name} must be {what}, got {name}={value!r}.")
+    if not vehicle.steering_wheel_share < 1.0:
+        raise ValueError(
+            "vehicle parameter steering_wheel_share must be below 1 (the lower column and the "
+            "rack keep some inertia), got "
+            f"steering_wheel_share={vehicle.steering_wheel_share!r}."
+        )
     return vehicle
 
 
@@ -232,4 +282,5 @@ _MAY_BE_ZERO = {
     "pneumatic_trail",
     "sensor_noise",
     "roll_damping",
+    "column_damping",
 }
