@@ -593,8 +593,8 @@ def _validation_rmse(base, candidates, target, folds, step):
         raise ValueError(
             f"friction_velocity={step.friction_velocity!r}, "
             f"velocity_filter={step.velocity_filter!r}: the 'auto' choice needs rows with every "
-            f"input and the target observed in at least 2 parts of the data; got {len(base)} "
-            "such row(s). Give more recordings, or fixed values."
+            f"input and the target observed in at least 2 parts of the data; got "
+            f"n_samples={len(base)} such rows. Give more recordings, or fixed values."
         )
     scale = base.std(axis=0)
     scale[scale == 0] = 1.0
