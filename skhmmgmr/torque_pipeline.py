@@ -22,10 +22,10 @@ friction input.
 The friction band is the steering system's, and whether the velocity needs the filter depends
 on its sensor: both differ from car to car. With ``"auto"`` (the default of
 :func:`make_torque_pipeline`) ``fit`` chooses them on the training recordings: every
-candidate of :data:`FRICTION_CANDIDATES` and :data:`FILTER_CANDIDATES` is scored by the
+candidate of ``FRICTION_CANDIDATES`` and ``FILTER_CANDIDATES`` is scored by the
 held-out error of a least-squares fit of the target on the inputs and the derived inputs, the
-recordings split in :data:`SEARCH_FOLDS` folds, and the candidate of least error is kept. A
-linear fit ranks the candidates as the regressor does (the friction input enters every
+recordings split in ``SEARCH_FOLDS`` folds, and the candidate of least error is kept. A
+linear fit ranks the candidates nearly as the regressor does (the friction input enters every
 state's regression alike) at a small part of its cost.
 """
 
@@ -125,8 +125,8 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
     friction_velocity : float, "auto" or None, default=0.1
         Steering-wheel velocity [rad/s] over which Coulomb friction changes sign; the derived
         input ``steering_friction`` is ``tanh(velocity / friction_velocity)``. ``"auto"``: the
-        band of :data:`FRICTION_CANDIDATES` (0.025 to 0.8 rad/s) of least held-out error,
-        chosen in ``fit`` (which then needs ``y``). ``None`` adds no friction input.
+        band of 0.025, 0.05, 0.1, 0.2, 0.4 and 0.8 rad/s (``FRICTION_CANDIDATES``) of least
+        held-out error, chosen in ``fit`` (which then needs ``y``). ``None`` adds no friction input.
     friction_column : str or int, default="steering_wheel_velocity"
         The column holding the steering-wheel velocity (a name, or a position for arrays).
     load_columns : tuple of str or int, default=("steering_wheel_angle", "lateral_acceleration")
@@ -137,9 +137,9 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
     velocity_filter : float, "auto" or None, default=None
         Time constant [s] of a causal first-order low-pass filter on the velocity before the
         friction input (0.02 s suits 100 Hz sensors; at 20 Hz it changes little). ``None``
-        filters nothing. A time constant needs ``sampling_period``. ``"auto"``: none or one of
-        :data:`FILTER_CANDIDATES`, chosen in ``fit`` with the friction band (no filter without
-        ``sampling_period``). The filter starts at the first observed
+        filters nothing. A time constant needs ``sampling_period``. ``"auto"``: none, 0.02 or
+        0.05 s (``FILTER_CANDIDATES``), chosen in ``fit`` with the friction band (no filter
+        without ``sampling_period``). The filter starts at the first observed
         velocity of each recording (its output equals it there); a missing velocity gives a
         missing friction input and leaves the filter's state alone, and the next observed
         velocity is taken in over the whole time since the last one.
@@ -564,7 +564,7 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
 
 def _search_folds(layout, n_samples):
     """The fold of every row (caller's order) for the inner validation: whole recordings, in
-    turn, when there are at least :data:`SEARCH_FOLDS`; else every recording cut in that many
+    turn, when there are at least ``SEARCH_FOLDS``; else every recording cut in that many
     consecutive blocks."""
     recordings = layout.recordings(n_samples)
     folds = np.empty(n_samples, dtype=np.intp)

@@ -10,8 +10,10 @@ import shutil
 import numpy as np
 import pandas as pd
 import pytest
+import sklearn
 
 from skhmmgmr import SteeringFeatures, make_torque_pipeline, portable
+from skhmmgmr.datasets import to_panel
 from skhmmgmr.torque_pipeline import FILTER_CANDIDATES, FRICTION_CANDIDATES, low_pass
 
 COLUMNS = ["steering_wheel_angle", "steering_wheel_velocity", "lateral_acceleration"]
@@ -237,3 +239,23 @@ def test_the_command_line_chooses_and_reports_the_settings(data, tmp_path, capsy
     assert band in FRICTION_CANDIDATES and time_constant in FILTER_CANDIDATES
     assert fitted[0].sampling_period == pytest.approx(2 * PERIOD)
     assert f"friction_velocity {band:g}" in capsys.readouterr().out
+
+
+def test_the_recordings_reach_the_choice_by_every_path(data):
+    """groups with metadata routing off or on, or a panel's index: the same folds, the same
+    table."""
+
+    def table(X, y, **groups):
+        model = make_torque_pipeline(2, sampling_period=PERIOD, n_iter=2, random_state=0)
+        return model.fit(X, y, **groups)[0].friction_search_
+
+    X, y, groups = data[COLUMNS], data["driver_torque"], data["recording"].to_numpy()
+    expected = table(X, y, groups=groups)
+    with sklearn.config_context(enable_metadata_routing=True):
+        pd.testing.assert_frame_equal(table(X, y, groups=groups), expected)
+    panel = to_panel(data.assign(time=data.groupby("recording").cumcount() * PERIOD))
+    pd.testing.assert_frame_equal(table(panel[COLUMNS], panel["driver_torque"]), expected)
+    # one recording: other folds, another table
+    assert not np.allclose(
+        table(X, y)["validation_rmse"].to_numpy(), expected["validation_rmse"].to_numpy()
+    )
