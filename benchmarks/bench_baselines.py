@@ -10,8 +10,9 @@ recordings:
   back, within its recording; the first rows repeat the first value);
 - ``HMMGMRRegressor`` with 5 and 8 states on the 18 features (the thesis' model);
 - ``make_torque_pipeline`` (the steering system's derived inputs, then HMM-GMR) with the number
-  of states chosen on the validation recordings by mean accuracy, then, at that number, the
-  velocity filter of the friction input (none or 20 ms) chosen the same way.
+  of states chosen on the validation recordings by mean accuracy (the friction band and the
+  velocity filter chosen in ``fit``, the defaults), then, at that number, that filter or a
+  fixed 20 ms one chosen the same way.
 
 Printed per model: mean and worst-recording test accuracy (%), roughness (std of the estimate's
 time derivative, Nm/s, the thesis' smoothness), the D.5-normalised performance score at the
@@ -136,7 +137,8 @@ def evaluate(name, model, train, test, rate, columns, grouped):
 
 
 def choose_pipeline(data, rate, states):
-    """The pipeline's number of states, then its velocity filter, by mean validation accuracy."""
+    """The pipeline's number of states, then its velocity filter (the one fit chooses, or
+    20 ms), by mean validation accuracy."""
     train, validation = data[data["split"] == "train"], data[data["split"] == "validation"]
 
     def accuracy(**params):
@@ -148,7 +150,8 @@ def choose_pipeline(data, rate, states):
 
     by_states = {k: accuracy(n_states=k) for k in states}
     k = max(by_states, key=by_states.get)
-    by_filter = {None: by_states[k], 0.02: accuracy(n_states=k, velocity_filter=0.02)}
+    # the default ("auto": chosen in fit on the training recordings) against a fixed 20 ms
+    by_filter = {"auto": by_states[k], 0.02: accuracy(n_states=k, velocity_filter=0.02)}
     return k, max(by_filter, key=by_filter.get), by_states, by_filter
 
 

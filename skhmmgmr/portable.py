@@ -73,8 +73,10 @@ steps in order, each an object with ``name`` (the step's name in the pipeline) a
 
 - ``"SteeringFeatures"`` steps, first: ``params`` (``friction_velocity``, ``friction_column``,
   ``load_columns``, ``powers``, ``velocity_filter``, ``sampling_period``: the transformer's
-  parameters) and its fitted facts ``n_features_in`` and ``feature_names_in`` (the input
-  columns, or null when fitted on an array). The step appends to its inputs, in this order:
+  parameters, with the values chosen in ``fit`` (``friction_velocity_``,
+  ``velocity_filter_``) in place of ``"auto"``) and its fitted facts ``n_features_in`` and
+  ``feature_names_in`` (the input columns, or null when fitted on an array). The step
+  appends to its inputs, in this order:
   ``steering_friction = tanh(v / friction_velocity)`` (unless ``friction_velocity`` is null)
   with ``v`` the column ``friction_column``, and for every column ``x`` of ``load_columns``
   and every ``p`` of ``powers`` ``sign(x) |x|^p`` (named ``<x>_signed_square``, ``<x>_cube``,
@@ -383,12 +385,19 @@ def _plain(value):
     raise TypeError(f"cannot export the parameter value {value!r} of type {_type_name(value)}")
 
 
+def _fitted_param(step, key):
+    """A parameter of a fitted ``SteeringFeatures``, the value chosen in place of ``"auto"``."""
+    if key in ("friction_velocity", "velocity_filter"):
+        return getattr(step, f"{key}_")
+    return getattr(step, key)
+
+
 def _steering_dict(name, step):
     names = getattr(step, "feature_names_in_", None)
     return {
         "name": str(name),
         "type": STEERING_TYPE,
-        "params": {key: _plain(getattr(step, key)) for key in STEERING_PARAMS},
+        "params": {key: _plain(_fitted_param(step, key)) for key in STEERING_PARAMS},
         "n_features_in": int(step.n_features_in_),
         "feature_names_in": None if names is None else [str(n) for n in names],
     }

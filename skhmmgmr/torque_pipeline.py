@@ -18,6 +18,15 @@ data frame, so the selection framework keeps or drops them like any other featur
 sampling rates the measured velocity is noisy at the scale of the friction band; a causal
 first-order filter (``velocity_filter``, within each recording) keeps that noise out of the
 friction input.
+
+The friction band is the steering system's, and whether the velocity needs the filter depends
+on its sensor: both differ from car to car. With ``"auto"`` (the default of
+:func:`make_torque_pipeline`) ``fit`` chooses them on the training recordings: every
+candidate of ``FRICTION_CANDIDATES`` and ``FILTER_CANDIDATES`` is scored by the
+held-out error of a least-squares fit of the target on the inputs and the derived inputs, the
+recordings split in ``SEARCH_FOLDS`` folds, and the candidate of least error is kept. A
+linear fit ranks the candidates nearly as the regressor does (the friction input enters every
+state's regression alike) at a small part of its cost.
 """
 
 import inspect
@@ -34,6 +43,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._core._compat import (
     Interval,
+    StrOptions,
     _fit_context,
     _routing_enabled,
     validate_parameter_constraints,
@@ -47,6 +57,14 @@ from .streaming._derived import check_time_steps
 __all__ = ["SteeringFeatures", "TorquePipeline", "make_torque_pipeline"]
 
 FRICTION_NAME = "steering_friction"
+#: The friction bands [rad/s] ``friction_velocity="auto"`` compares (a factor 2 apart, over the
+#: bands of passenger cars' steering systems).
+FRICTION_CANDIDATES = (0.025, 0.05, 0.1, 0.2, 0.4, 0.8)
+#: The velocity filters [s] ``velocity_filter="auto"`` compares (``None``: no filter).
+FILTER_CANDIDATES = (None, 0.02, 0.05)
+#: Folds of the inner validation of the "auto" choices.
+SEARCH_FOLDS = 3
+AUTO = "auto"
 
 
 def _power_name(column, power):
@@ -93,7 +111,9 @@ def low_pass(values, decay):
 class SteeringFeatures(TransformerMixin, BaseEstimator):
     """Append the friction and load-compression inputs of a power-assisted steering system.
 
-    Nothing is learned. Without ``velocity_filter`` the transform is row by row, so it is
+    Only the ``"auto"`` settings are learned: ``fit`` chooses the friction band and the
+    velocity filter on the target by a grouped inner validation (see the module's docstring
+    and ``friction_search_``). Without a velocity filter the transform is row by row, so it is
     causal and streams: the same row always gives the same derived inputs. With it, the
     friction input reads the velocity through a causal first-order filter that restarts at
     every recording (the recordings come from ``groups`` or from the index of a panel,
@@ -102,10 +122,11 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
 
     Parameters
     ----------
-    friction_velocity : float or None, default=0.1
+    friction_velocity : float, "auto" or None, default=0.1
         Steering-wheel velocity [rad/s] over which Coulomb friction changes sign; the derived
-        input ``steering_friction`` is ``tanh(velocity / friction_velocity)``. ``None`` adds no
-        friction input.
+        input ``steering_friction`` is ``tanh(velocity / friction_velocity)``. ``"auto"``: the
+        band of 0.025, 0.05, 0.1, 0.2, 0.4 and 0.8 rad/s (``FRICTION_CANDIDATES``) of least
+        held-out error, chosen in ``fit`` (which then needs ``y``). ``None`` adds no friction input.
     friction_column : str or int, default="steering_wheel_velocity"
         The column holding the steering-wheel velocity (a name, or a position for arrays).
     load_columns : tuple of str or int, default=("steering_wheel_angle", "lateral_acceleration")
@@ -113,10 +134,12 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
     powers : tuple of int, default=(2, 3)
         Powers ``p >= 2`` appended for each load column as ``sign(x) |x|^p``, named
         ``<column>_signed_square`` (2), ``<column>_cube`` (3) or ``<column>_signed_power<p>``.
-    velocity_filter : float or None, default=None
+    velocity_filter : float, "auto" or None, default=None
         Time constant [s] of a causal first-order low-pass filter on the velocity before the
         friction input (0.02 s suits 100 Hz sensors; at 20 Hz it changes little). ``None``
-        filters nothing. Needs ``sampling_period``. The filter starts at the first observed
+        filters nothing. A time constant needs ``sampling_period``. ``"auto"``: none, 0.02 or
+        0.05 s (``FILTER_CANDIDATES``), chosen in ``fit`` with the friction band (no filter
+        without ``sampling_period``). The filter starts at the first observed
         velocity of each recording (its output equals it there); a missing velocity gives a
         missing friction input and leaves the filter's state alone, and the next observed
         velocity is taken in over the whole time since the last one.
@@ -124,6 +147,15 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
 
     Attributes
     ----------
+    friction_velocity_ : float or None
+        The friction band the transform uses: ``friction_velocity``, or the one chosen.
+    velocity_filter_ : float or None
+        The velocity filter's time constant the transform uses (``None``: no filter).
+    friction_search_ : DataFrame or None
+        The ``"auto"`` choice: one row per candidate, with ``friction_velocity``,
+        ``velocity_filter``, ``validation_rmse`` (held-out root mean squared error of the
+        linear fit, in the target's unit) and ``chosen``; ``None`` without an ``"auto"``
+        setting.
     n_features_in_ : int
         Number of input columns.
     feature_names_in_ : ndarray of shape (n_features,)
@@ -146,14 +178,32 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
      'lateral_acceleration_signed_square', 'lateral_acceleration_cube']
     >>> derived["lateral_acceleration_signed_square"].tolist()
     [1.0, -4.0]
+
+    With ``"auto"`` (the default of :func:`make_torque_pipeline`) ``fit`` chooses them on the
+    torque:
+
+    >>> from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping
+    >>> data = make_lane_keeping(60.0, sampling_rate=20.0, random_state=0)
+    >>> step = SteeringFeatures(friction_velocity="auto", velocity_filter="auto")
+    >>> step = step.fit(data[list(FEATURE_NAMES)], data["driver_torque"])
+    >>> step.friction_velocity_, step.velocity_filter_
+    (0.1, None)
     """
 
     _parameter_constraints = {
-        "friction_velocity": [Interval(numbers.Real, 0, None, closed="neither"), None],
+        "friction_velocity": [
+            Interval(numbers.Real, 0, None, closed="neither"),
+            StrOptions({AUTO}),
+            None,
+        ],
         "friction_column": [str, Interval(numbers.Integral, 0, None, closed="left")],
         "load_columns": [tuple, list],
         "powers": [tuple, list],
-        "velocity_filter": [Interval(numbers.Real, 0, None, closed="neither"), None],
+        "velocity_filter": [
+            Interval(numbers.Real, 0, None, closed="neither"),
+            StrOptions({AUTO}),
+            None,
+        ],
         "sampling_period": [Interval(numbers.Real, 0, None, closed="neither"), None],
     }
 
@@ -178,16 +228,19 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y=None, groups=None):
-        """Check that ``X`` holds the named columns.
+        """Check that ``X`` holds the named columns; choose the ``"auto"`` settings.
 
         Parameters
         ----------
         X : DataFrame or array-like of shape (n_samples, n_features)
             Sensed inputs. Columns are found by name in a data frame, by position in an array.
-        y : None
-            Ignored.
-        groups : None
-            Ignored (the recordings matter in :meth:`transform` only).
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs), default=None
+            The target (the driver torque); needed by an ``"auto"`` setting, ignored
+            otherwise.
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row: the folds of the ``"auto"`` choice are whole
+            recordings, and the velocity filter restarts at each. ``None``: the index's
+            recording level if any, else one recording.
 
         Returns
         -------
@@ -195,15 +248,73 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
             The fitted transformer.
         """
         self._check_parameters()
-        validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
+        values = validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
         self._check_inputs()
+        self.friction_velocity_ = self.friction_velocity
+        self.velocity_filter_ = self.velocity_filter
+        self.friction_search_ = None
+        if self.friction_velocity is None:
+            self.velocity_filter_ = None
+        elif AUTO in (self.friction_velocity, self.velocity_filter):
+            self.friction_search_ = self._search(values, X, y, groups)
+            chosen = self.friction_search_[self.friction_search_["chosen"]].iloc[0]
+            self.friction_velocity_ = float(chosen["friction_velocity"])
+            self.velocity_filter_ = chosen["velocity_filter"]
+            if self.velocity_filter_ is not None:
+                self.velocity_filter_ = float(self.velocity_filter_)
         return self
+
+    def _candidates(self):
+        """The (friction band, velocity filter) pairs the inner validation compares."""
+        bands = FRICTION_CANDIDATES if self.friction_velocity == AUTO else (self.friction_velocity,)
+        if self.velocity_filter != AUTO:
+            filters = (self.velocity_filter,)
+        elif self.sampling_period is None:  # a filter needs the time between two rows
+            filters = (None,)
+        else:
+            filters = FILTER_CANDIDATES
+        return [(band, time_constant) for time_constant in filters for band in bands]
+
+    def _search(self, values, X, y, groups):
+        """The table of the ``"auto"`` choice: every candidate's validation RMSE."""
+        if y is None:
+            raise ValueError(
+                f"friction_velocity={self.friction_velocity!r}, "
+                f"velocity_filter={self.velocity_filter!r}: an 'auto' setting is chosen on the "
+                "target, so fit needs y (the torque)."
+            )
+        layout = read_layout(X, groups)
+        target = np.asarray(align_target(X, y, layout), dtype=float)
+        target = target.reshape(len(values), -1)
+        positions = self._sources()
+        base = [values, *self._load_inputs(values, positions).values()]
+        velocity = values[:, positions[self.friction_column]]
+        folds = _search_folds(layout, len(values))
+        velocities, rows = {}, []
+        for band, time_constant in self._candidates():
+            if time_constant not in velocities:
+                velocities[time_constant] = (
+                    velocity
+                    if time_constant is None
+                    else self._filtered(velocity, X, groups, self._decay(time_constant))
+                )
+            rows.append((band, time_constant, np.tanh(velocities[time_constant] / band)))
+        rmse = _validation_rmse(np.column_stack(base), [f for *_, f in rows], target, folds, self)
+        best = int(np.argmin(rmse))  # the first of equal ones: the order above
+        return pd.DataFrame(
+            {
+                "friction_velocity": [float(band) for band, _, _ in rows],
+                "velocity_filter": pd.Series([tc for _, tc, _ in rows], dtype=object),
+                "validation_rmse": rmse,
+                "chosen": np.arange(len(rows)) == best,
+            }
+        )
 
     def _check_parameters(self):
         """What the parameters' constraints cannot say: the powers, the load columns, and
         ``sampling_period`` with ``velocity_filter``."""
         self._check_powers()
-        if self.velocity_filter is not None and self.sampling_period is None:
+        if self.velocity_filter not in (None, AUTO) and self.sampling_period is None:
             raise ValueError(
                 f"velocity_filter={self.velocity_filter!r} needs sampling_period (the seconds "
                 "between two rows); got sampling_period=None."
@@ -228,17 +339,17 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
         ----------
         X : DataFrame or array-like of shape (n_samples, n_features)
             Sensed inputs.
-        y : None
-            Ignored.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs), default=None
+            The target, for an ``"auto"`` setting (see :meth:`fit`).
         groups : array-like of shape (n_samples,), default=None
-            Recording id of every row, for ``velocity_filter``.
+            Recording id of every row, for ``velocity_filter`` and the ``"auto"`` choice.
 
         Returns
         -------
         X_out : DataFrame or ndarray of shape (n_samples, n_features)
             See :meth:`transform`.
         """
-        return self.fit(X).transform(X, groups=groups)
+        return self.fit(X, y, groups=groups).transform(X, groups=groups)
 
     def transform(self, X, groups=None):
         """Append the derived inputs.
@@ -268,13 +379,10 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
         derived = {}
         if self.friction_velocity is not None:
             velocity = values[:, positions[self.friction_column]]
-            if self.velocity_filter is not None:
-                velocity = self._filtered(velocity, X, groups)
-            derived[FRICTION_NAME] = np.tanh(velocity / self.friction_velocity)
-        for column in self.load_columns:
-            x = values[:, positions[column]]
-            for power in self.powers:
-                derived[_power_name(_column_label(column), power)] = np.sign(x) * np.abs(x) ** power
+            if self.velocity_filter_ is not None:
+                velocity = self._filtered(velocity, X, groups, self._decay())
+            derived[FRICTION_NAME] = np.tanh(velocity / self.friction_velocity_)
+        derived.update(self._load_inputs(values, positions))
         if frame is None:
             return np.column_stack([values, *derived.values()])
         out = pd.DataFrame(derived, index=frame.index)
@@ -341,13 +449,13 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
         positions = self._sources()
         names = getattr(self, "feature_names_in_", None)
         friction = self.friction_velocity is not None
-        filtered = friction and self.velocity_filter is not None
+        filtered = friction and self.velocity_filter_ is not None
         return {
             "n_features_in": int(self.n_features_in_),
             "feature_names_in": None if names is None else [str(name) for name in names],
             "feature_names_out": [str(name) for name in self.get_feature_names_out()],
             "friction_position": positions[self.friction_column] if friction else None,
-            "friction_velocity": float(self.friction_velocity) if friction else None,
+            "friction_velocity": float(self.friction_velocity_) if friction else None,
             "filter_decay": self._decay() if filtered else None,
             "sampling_period": None
             if self.sampling_period is None
@@ -356,22 +464,34 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
             "powers": [int(power) for power in self.powers],
         }
 
-    def _decay(self):
-        return math.exp(-self.sampling_period / self.velocity_filter)
+    def _decay(self, time_constant=None):
+        """The velocity filter's factor per row (the fitted filter's by default)."""
+        if time_constant is None:
+            time_constant = self.velocity_filter_
+        return math.exp(-self.sampling_period / time_constant)
+
+    def _load_inputs(self, values, positions):
+        """The signed powers of the load columns, by name."""
+        derived = {}
+        for column in self.load_columns:
+            x = values[:, positions[column]]
+            for power in self.powers:
+                derived[_power_name(_column_label(column), power)] = np.sign(x) * np.abs(x) ** power
+        return derived
 
     def _derived_names(self):
         names = [FRICTION_NAME] if self.friction_velocity is not None else []
         names += [_power_name(_column_label(c), p) for c in self.load_columns for p in self.powers]
         return names
 
-    def _filtered(self, velocity, X, groups):
-        """The velocity through the first-order filter, restarted at every recording."""
+    def _filtered(self, velocity, X, groups, decay):
+        """The velocity through the first-order filter of factor ``decay`` per row, restarted
+        at every recording."""
         rows = read_layout(X, groups)
         ordered = rows.to_filter_order(velocity)
         recordings = rows.recordings(len(ordered))
         if rows.time is not None:
             check_time_steps(np.asarray(rows.time, dtype=float), recordings, self)
-        decay = self._decay()
         filtered = np.empty_like(ordered)
         for start, stop in zip(recordings.starts, recordings.stops, strict=True):
             filtered[start:stop] = low_pass(ordered[start:stop], decay)
@@ -442,6 +562,93 @@ class SteeringFeatures(TransformerMixin, BaseEstimator):
         return tags
 
 
+def _search_folds(layout, n_samples):
+    """The fold of every row (caller's order) for the inner validation: whole recordings, in
+    turn, when there are at least ``SEARCH_FOLDS``; else every recording cut in that many
+    consecutive blocks."""
+    recordings = layout.recordings(n_samples)
+    folds = np.empty(n_samples, dtype=np.intp)
+    spans = list(zip(recordings.starts, recordings.stops, strict=True))
+    for number, (start, stop) in enumerate(spans):
+        if len(spans) >= SEARCH_FOLDS:
+            folds[start:stop] = number % SEARCH_FOLDS
+        else:
+            folds[start:stop] = np.arange(stop - start) * SEARCH_FOLDS // (stop - start)
+    return layout.to_caller_order(folds)
+
+
+def _validation_rmse(base, candidates, target, folds, step):
+    """Held-out RMSE of a least-squares fit of ``target`` on ``base`` and each candidate
+    column, every fold left out in turn (the rows where any of them is missing left out).
+
+    One pass over the rows per fold and candidate: the fits come from the folds' sums of
+    products, the training sum being the total less the held-out fold's.
+    """
+    finite = np.isfinite(base).all(axis=1) & np.isfinite(target).all(axis=1)
+    for column in candidates:
+        finite &= np.isfinite(column)
+    base, target, folds = base[finite], target[finite], folds[finite]
+    used = [fold for fold in range(SEARCH_FOLDS) if np.any(folds == fold)]
+    if len(used) < 2 or len(base) <= base.shape[1] + 2:
+        raise ValueError(
+            f"friction_velocity={step.friction_velocity!r}, "
+            f"velocity_filter={step.velocity_filter!r}: the 'auto' choice needs rows with every "
+            f"input and the target observed in at least 2 parts of the data; got "
+            f"n_samples={len(base)} such rows. Give more recordings, or fixed values."
+        )
+    scale = base.std(axis=0)
+    scale[scale == 0] = 1.0
+    base = (base - base.mean(axis=0)) / scale
+    base = np.column_stack([np.ones(len(base)), base])
+    n_base, n_outputs = base.shape[1], target.shape[1]
+    sums = {fold: _products(base[folds == fold], target[folds == fold]) for fold in used}
+    rmse = []
+    for column in candidates:
+        column = column[finite]
+        held_out = {
+            fold: _with_column(
+                sums[fold], base[folds == fold], target[folds == fold], column[folds == fold]
+            )
+            for fold in used
+        }
+        total = sum(held_out.values())
+        squared = 0.0
+        for fold in used:
+            trained = total - held_out[fold]
+            squared += _held_out_squares(trained, held_out[fold], n_base + 1)
+        rmse.append(math.sqrt(max(squared, 0.0) / (len(base) * n_outputs)))
+    return np.asarray(rmse)
+
+
+def _products(base, target):
+    """Sums of products of the columns ``[base, target]`` of one fold."""
+    joined = np.column_stack([base, target])
+    return joined.T @ joined
+
+
+def _with_column(products, base, target, column):
+    """The sums of products of ``[base, column, target]`` from those of ``[base, target]``."""
+    n_base = base.shape[1]
+    cross = np.concatenate([base.T @ column, [column @ column], target.T @ column])
+    size = products.shape[0] + 1
+    out = np.empty((size, size))
+    order = [*range(n_base), *range(n_base + 1, size)]  # where [base, target] go
+    out[np.ix_(order, order)] = products
+    out[n_base, :] = out[:, n_base] = cross
+    return out
+
+
+def _held_out_squares(trained, held_out, n_inputs):
+    """Sum of squared residuals on the held-out fold of the least-squares fit on the trained
+    sums (inputs first, then the targets), a tiny ridge keeping it solvable."""
+    gram, cross = trained[:n_inputs, :n_inputs], trained[:n_inputs, n_inputs:]
+    ridge = 1e-9 * np.trace(gram) / n_inputs
+    coef = np.linalg.solve(gram + ridge * np.eye(n_inputs), cross)
+    inputs, outputs = held_out[:n_inputs, :n_inputs], held_out[:n_inputs, n_inputs:]
+    squares = held_out[n_inputs:, n_inputs:]
+    return float(np.trace(squares - 2.0 * coef.T @ outputs + coef.T @ inputs @ coef))
+
+
 def restore_steering_features(params, n_features_in, feature_names_in=None):
     """A fitted :class:`SteeringFeatures` from its parameters and fitted facts (a step of the
     portable model file), refused as ``fit`` would refuse them."""
@@ -452,6 +659,14 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
         caller_name="SteeringFeatures",
     )
     step._check_parameters()
+    for name in ("friction_velocity", "velocity_filter"):
+        if params.get(name) == AUTO:
+            raise ValueError(
+                f"{name}='auto' is a setting to fit; a fitted step holds the chosen value."
+            )
+    step.friction_velocity_ = step.friction_velocity
+    step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
+    step.friction_search_ = None
     step.n_features_in_ = n_features_in
     if feature_names_in is not None:
         step.feature_names_in_ = np.asarray(feature_names_in, dtype=object)
@@ -486,8 +701,11 @@ def _n_rows(X):
 
 
 def _needs_recordings(step):
-    """Whether the step's output depends on where recordings begin (a filter over the rows)."""
-    return isinstance(step, SteeringFeatures) and step.velocity_filter is not None
+    """Whether the step's output depends on where recordings begin (a filter over the rows,
+    or a choice of one)."""
+    if not isinstance(step, SteeringFeatures) or step.velocity_filter is None:
+        return False
+    return step.velocity_filter != AUTO or step.sampling_period is not None
 
 
 class TorquePipeline(Pipeline):
@@ -829,10 +1047,10 @@ class TorquePipeline(Pipeline):
 def make_torque_pipeline(
     n_states=5,
     *,
-    friction_velocity=0.1,
+    friction_velocity="auto",
     load_columns=("steering_wheel_angle", "lateral_acceleration"),
     powers=(2, 3),
-    velocity_filter=None,
+    velocity_filter="auto",
     sampling_period=None,
     **params,
 ):
@@ -855,10 +1073,13 @@ def make_torque_pipeline(
         Number of hidden states of the regressor; choose it on validation recordings
         (:class:`~skhmmgmr.StateSelector`, or a ``GridSearchCV`` over ``hmmgmr__n_states``).
     friction_velocity, load_columns, powers, velocity_filter
-        Passed to :class:`SteeringFeatures`. At 100 Hz, ``velocity_filter=0.02`` with the
-        ``sampling_period`` keeps the velocity sensor's noise out of the friction input (and
-        the recordings must then reach the transformer too: a panel index, or ``groups``
-        routed with metadata routing on).
+        Passed to :class:`SteeringFeatures`. By default (``"auto"``) the friction band and the
+        velocity filter are chosen in ``fit`` on the training recordings
+        (``pipeline[0].friction_search_``), so that they suit the car; the filter is
+        considered only with ``sampling_period``, which should therefore be given (at 100 Hz
+        the filter keeps the velocity sensor's noise out of the friction input). The
+        recordings reach the transformer through ``groups`` given to the pipeline or a panel
+        index.
     {sampling_period}
     **params
         Any other parameter of :class:`~skhmmgmr.HMMGMRRegressor` (``random_state``,

@@ -51,6 +51,8 @@ ESTIMATORS = [
     StateSelector(k_min=2, k_max=3, **SEARCH),
     # columns by position: the checks pass arrays without names, some with a single column
     SteeringFeatures(friction_column=0, load_columns=(0,)),
+    # the friction band chosen in fit, on the target the checks give
+    SteeringFeatures(friction_velocity="auto", friction_column=0, load_columns=(0,)),
 ]
 # Configurations as users write them, for which fit (or predict) cannot run on the checks'
 # data: every check that needs it is declared, and must fail.

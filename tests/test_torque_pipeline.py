@@ -320,7 +320,13 @@ def test_velocity_filter_needs_the_sampling_period():
 
 def test_recordings_reach_the_filter_through_routing(recordings):
     X, y, groups = recordings
-    params = {"velocity_filter": 0.1, "sampling_period": 0.05, "n_iter": 5, "random_state": 0}
+    params = {
+        "friction_velocity": 0.1,
+        "velocity_filter": 0.1,
+        "sampling_period": 0.05,
+        "n_iter": 5,
+        "random_state": 0,
+    }
     with sklearn.config_context(enable_metadata_routing=True):
         pipeline = make_torque_pipeline(n_states=2, **params).fit(X, y, groups=groups)
         routed = pipeline.predict(X, groups=groups)

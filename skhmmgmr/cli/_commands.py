@@ -310,12 +310,13 @@ PIPELINES = ("hmmgmr", "torque")
 # Options of --pipeline torque, the parameters of make_torque_pipeline they set.
 TORQUE_OPTIONS = {
     "friction_velocity": "steering-wheel velocity [rad/s] over which friction changes sign "
-    "('none': no friction input)",
+    "('auto': chosen on the training recordings; 'none': no friction input)",
     "friction_column": "column of the steering-wheel velocity",
     "load_columns": "columns whose signed powers are appended (the option alone: none)",
     "powers": "powers >= 2 appended for every load column",
     "velocity_filter": "time constant [s] of a causal low-pass filter on the velocity before "
-    "the friction input, restarted at every recording",
+    "the friction input, restarted at every recording ('auto': none or one chosen on the "
+    "training recordings, given the sampling period; 'none': no filter)",
 }
 
 
@@ -366,7 +367,7 @@ def _model_to_fit(args, period):
     options.update(given)
     for name in ("load_columns", "powers"):
         options[name] = tuple(options[name])
-    if options["velocity_filter"] is not None and period is None:
+    if options["velocity_filter"] not in (None, "auto") and period is None:
         raise CommandError(
             f"--velocity-filter needs the sampling period: give --sampling-period, or a time "
             f"column (--time, now {args.time!r})"
@@ -412,6 +413,11 @@ def command_fit(args):
     if args.pipeline == "torque":
         names = list(model[0].get_feature_names_out())[len(features) :]
         derived = f"; derived by the torque pipeline: {', '.join(names) or 'none'}"
+        if model[0].friction_velocity is not None:
+            derived += (
+                f" (friction_velocity {model[0].friction_velocity_:g}, velocity_filter "
+                f"{model[0].velocity_filter_ or 'none'})"
+            )
     _log(
         args,
         f"Fitted K={args.n_states} on {len(features)} input(s): {', '.join(features)}"
@@ -563,6 +569,11 @@ def _none_or_float(text):
     return None if text.lower() == "none" else float(text)
 
 
+def _setting(text):
+    """A derived input's setting: a number, 'none' or 'auto' (chosen in fit)."""
+    return "auto" if text.lower() == "auto" else _none_or_float(text)
+
+
 def _add_torque_options(parser):
     """Options of ``fit --pipeline torque``, the parameters of ``make_torque_pipeline``."""
     defaults = _torque_defaults()
@@ -574,11 +585,11 @@ def _add_torque_options(parser):
         return f"{TORQUE_OPTIONS[name]}; --pipeline torque only (default: {value})"
 
     kinds = {
-        "friction_velocity": dict(type=_none_or_float),
+        "friction_velocity": dict(type=_setting),
         "friction_column": {},
         "load_columns": dict(nargs="*"),
         "powers": dict(nargs="*", type=int),
-        "velocity_filter": dict(type=float),
+        "velocity_filter": dict(type=_setting),
     }
     for name, kind in kinds.items():
         parser.add_argument(_option(name), default=argparse.SUPPRESS, help=shown(name), **kind)

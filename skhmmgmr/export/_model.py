@@ -163,15 +163,15 @@ def _derived_inputs(features, regressor):
     }
     friction = None
     if features.friction_velocity is not None:
-        friction = (positions[features.friction_column], float(features.friction_velocity))
+        friction = (positions[features.friction_column], float(features.friction_velocity_))
     powers = tuple(
         (positions[column], int(power))
         for column in features.load_columns
         for power in features.powers
     )
     decay = None
-    if features.friction_velocity is not None and features.velocity_filter is not None:
-        decay = math.exp(-features.sampling_period / features.velocity_filter)
+    if features.friction_velocity is not None and features.velocity_filter_ is not None:
+        decay = math.exp(-features.sampling_period / features.velocity_filter_)
     derived = DerivedInputs(friction, powers, decay)
     expected = list(features.get_feature_names_out())
     given = getattr(regressor, "feature_names_in_", None)
