@@ -189,7 +189,7 @@ def expected_failed_checks(estimator):
     """
     if isinstance(estimator, HMMGMRRegressor):
         n_states = (
-            estimator._total_states()
+            estimator.total_states()
             if isinstance(estimator, HierarchicalHMMGMRRegressor)
             else estimator.n_states
         )

@@ -259,6 +259,23 @@ class GaussianEmissions(ABC):
     def _distinct_precisions_chol(self):
         return self.precisions_chol
 
+    def reordered(self, order):
+        """The same emission with the states in ``order`` (a tied covariance stays shared)."""
+        return self._with(self.means[order], self.full_covariances[order])
+
+    @staticmethod
+    def stacked(blocks, weights):
+        """One emission of the states of every emission in ``blocks`` (same family), in
+        order; a tied family shares the ``weights``-weighted mean of the blocks'
+        covariances."""
+        weights = np.asarray(weights, dtype=float) / np.sum(weights)
+        means = np.vstack([block.means for block in blocks])
+        full = np.concatenate([block.full_covariances for block in blocks])
+        if isinstance(blocks[0], TiedCovariance):
+            shared = sum(w * b.covariances for w, b in zip(weights, blocks, strict=True))
+            return TiedCovariance(means, shared)
+        return blocks[0]._with(means, full)
+
     def with_means(self, means):
         """The same covariances about other state ``means`` (n_states, n_dims)."""
         return type(self)(means, self.covariances)

@@ -178,7 +178,7 @@ FIT_INFO_KEYS = (
 _HISTORIES = ("log_likelihood_history", "penalized_log_likelihood_history")
 
 
-def estimator_to_dict(estimator, *, output_names=None, training=None):
+def estimator_to_dict(estimator, *, model_type=REGRESSOR_TYPE, output_names=None, training=None):
     """:func:`to_dict` of a fitted estimator's ``model_``, with its ``get_params()``, fit
     information (:data:`FIT_INFO_KEYS`, the attributes ``name + "_"``) and its longest training
     recording (``longest_recording_``) added to ``training``."""
@@ -186,7 +186,7 @@ def estimator_to_dict(estimator, *, output_names=None, training=None):
     longest = getattr(estimator, "longest_recording_", None)
     return to_dict(
         estimator.model_,
-        model_type=estimator._portable_type,
+        model_type=model_type,
         estimator_params=estimator.get_params(),
         fit_info={key: getattr(estimator, key + "_", None) for key in FIT_INFO_KEYS},
         output_names=output_names,
@@ -194,14 +194,14 @@ def estimator_to_dict(estimator, *, output_names=None, training=None):
     )
 
 
-def estimator_from_dict(cls, data):
+def estimator_from_dict(cls, data, *, model_type=REGRESSOR_TYPE):
     """A fitted estimator of class ``cls`` restored from :func:`to_dict` output: its
     ``from_fitted_model`` with the stored parameters, then the stored fit information."""
     portable = read_model(data)
     kind = data.get("model_type", REGRESSOR_TYPE)
-    if kind != cls._portable_type:
+    if kind != model_type:
         raise ValueError(
-            f"the file holds a {kind} (its 'model_type'), not a {cls._portable_type}: read it "
+            f"the file holds a {kind} (its 'model_type'), not a {model_type}: read it "
             f"with {kind}.from_dict or skhmmgmr.portable.load"
         )
     try:

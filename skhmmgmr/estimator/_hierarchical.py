@@ -28,7 +28,7 @@ from .._hmm._em import (
     state_posteriors,
 )
 from .._hmm._em_data import Columns, EStepData
-from .._hmm._emissions import emission_family, make_emissions
+from .._hmm._emissions import GaussianEmissions, emission_family
 from .._hmm._hierarchy import Hierarchy, HierarchyParts
 from .._hmm._portable import HIERARCHICAL_TYPE
 from ._prediction_inputs import read_joint_inputs
@@ -252,8 +252,17 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
     def _hierarchy(self):
         return Hierarchy(self.states_per_manoeuvre_)
 
-    def _total_states(self):
-        """States of the flat model, or None when they depend on the labels of fit."""
+    def total_states(self):
+        """The number of states of the flat model the parameters give (the sum over the
+        manoeuvres), or None when it depends on the labels of ``fit`` (``manoeuvres=None``).
+
+        Examples
+        --------
+        >>> from skhmmgmr import HierarchicalHMMGMRRegressor
+        >>> model = HierarchicalHMMGMRRegressor(manoeuvres=["keep", "change"], n_states=[3, 2])
+        >>> model.total_states()
+        5
+        """
         if self.manoeuvres is None:
             return None
         return sum(self._sizes(self._names()))
@@ -358,14 +367,10 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
             owner[free[np.argmax(share)]] = m
         order = np.argsort(owner, kind="stable")
         sizes = np.bincount(owner, minlength=n_manoeuvres)
-        emissions = flat.emissions
-        covariances = emissions.covariances
-        if self.covariance_type != "tied":
-            covariances = covariances[order]
         permuted = HMMParameters(
             flat.startprob[order],
             flat.transmat[np.ix_(order, order)],
-            make_emissions(self.covariance_type, emissions.means[order], covariances),
+            flat.emissions.reordered(order),
         )
         structure = Hierarchy(sizes)
         stats = e_step(EStepData(_copy(columns), recordings, total), permuted)
@@ -429,7 +434,7 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
         names = self.manoeuvres_
         n_manoeuvres = hierarchy.n_manoeuvres
         starts, stops, seg_codes, follows = segments
-        means, covariances, weights = [], [], []
+        blocks, weights = [], []
         within = np.zeros((hierarchy.n_states, hierarchy.n_states))
         entry = np.empty(hierarchy.n_states)
         exit = np.zeros(hierarchy.n_states)
@@ -456,8 +461,7 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
             entry[span] = params.startprob
             # leaving: the segments followed by another manoeuvre in their recording
             exit[span] = (np.sum(follows[mine] >= 0) + PSEUDO_COUNT) / (n_rows + 1.0)
-            means.append(params.means)
-            covariances.append(params.emissions.covariances)
+            blocks.append(params.emissions)
             weights.append(n_rows)
         chain = np.full((n_manoeuvres, n_manoeuvres), PSEUDO_COUNT)
         changes = follows >= 0
@@ -472,12 +476,7 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
         first /= first.sum()
         startprob = first[hierarchy.state_manoeuvre] * entry
         transmat = hierarchy.compose(HierarchyParts(within, exit, chain, entry))
-        if self.covariance_type == "tied":
-            weights = np.asarray(weights, dtype=float) / np.sum(weights)
-            shared = sum(w * c for w, c in zip(weights, covariances, strict=True))
-            emissions = make_emissions("tied", np.vstack(means), shared)
-        else:
-            emissions = make_emissions("full", np.vstack(means), np.concatenate(covariances))
+        emissions = GaussianEmissions.stacked(blocks, weights)
         return HMMParameters(startprob / startprob.sum(), transmat, emissions)
 
     def fit_transform(self, X, y, groups=None, time=None, manoeuvre=None):

@@ -182,7 +182,7 @@ class ModelIOMixin:
         >>> bool(np.array_equal(restored.predict(X), model.predict(X)))
         True
         """
-        return estimator_to_dict(self, output_names=output_names)
+        return estimator_to_dict(self, model_type=self._portable_type, output_names=output_names)
 
     def export_json(self, path, *, output_names=None):
         """Write the portable model file (strict JSON) to ``path``.
@@ -219,7 +219,7 @@ class ModelIOMixin:
             inconsistent parameters, or is of another format version; the message names the
             key.
         """
-        return estimator_from_dict(cls, data)
+        return estimator_from_dict(cls, data, model_type=cls._portable_type)
 
     @classmethod
     def from_json(cls, path):
