@@ -5,6 +5,7 @@ from dataclasses import asdict, replace
 
 import numpy as np
 import pytest
+import scipy
 
 from skhmmgmr.datasets import (
     VEHICLE_RANGES,
@@ -62,6 +63,16 @@ def drive_weaving(rate, vehicle):
         )
 
 
+# The digests were taken with these versions; other NumPy/SciPy builds round the simulator's
+# floats differently in the last bits (the oldest supported versions do), so there the pin
+# says nothing about this package's code.
+PINNED_WITH = ("2.4.6", "1.17.1")
+
+
+@pytest.mark.skipif(
+    (np.__version__, scipy.__version__) != PINNED_WITH,
+    reason=f"bit-for-bit digests taken with NumPy/SciPy {PINNED_WITH}",
+)
 def test_the_reference_car_drives_bit_for_bit_as_before_cars_varied():
     # digests of the simulator before the car became a parameter (same machine arithmetic)
     assert digest(make_lane_keeping(5.0, random_state=0)) == (
