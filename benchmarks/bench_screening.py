@@ -94,6 +94,8 @@ def run(seeds, *, n_drivers, duration, screening_tol, n_jobs, cache):
         rows.append(
             {"seed": seed, "stage": "wall", "strict_s": strict_wall, "screened_s": screened_wall}
         )
+        seed_rows = pd.DataFrame(rows[-len(strict.timings) - 1 :])
+        print(seed_rows.round(2).to_string(index=False), flush=True)  # kept if a later seed fails
         check = {"seed": seed, **agreement(strict, screened)}
         check["subset_K"] = f"{'+'.join(strict.features)} K={strict.n_states}"
         checks.append(check)

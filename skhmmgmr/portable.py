@@ -14,9 +14,11 @@ of the format, shipped with the package (``skhmmgmr/portable_schema.json``).
 The file is one JSON object. Its header, for every kind of model:
 
 ``format``, ``format_version``, ``package_version``
-    What the file is (``"skhmmgmr-hmm-gmr"``), the version of the format (2; version 1,
-    written by skhmmgmr 0.1.0, held the regressor without ``model_type`` and ``training``, and
-    still loads) and which skhmmgmr wrote it. Readers refuse newer format versions.
+    What the file is (``"skhmmgmr-hmm-gmr"``), the version of the format and which skhmmgmr
+    wrote it. A file is written with the lowest version that holds its model: 3 for a model
+    whose read-out smooths (``output_decay``), 2 otherwise; version 1, written by skhmmgmr
+    0.1.0, held the regressor without ``model_type`` and ``training``, and still loads.
+    Readers refuse newer format versions.
 ``model_type``
     ``"HMMGMRRegressor"``, ``"HierarchicalHMMGMRRegressor"``, ``"TorquePipeline"`` or
     ``"Pipeline"`` (absent in version 1: a regressor).
@@ -60,6 +62,11 @@ the manoeuvres' probabilities being the sums of their states') holds next to the
     ``lags`` (L increasing sample counts) and ``variances`` (F x L, standardised units,
     ``null`` where unknown): every input's variogram, the variance of its value ``lag``
     samples earlier about its current one (:mod:`skhmmgmr._hmm._stale_inputs`).
+``output_decay`` (O numbers in [0, 1); version 3 only)
+    The causal first-order read-out of a model fitted with ``output_smoothing``: the estimate
+    of every accepted sample is ``a * (previous estimate) + (1 - a) * (the filter's
+    estimate)``, the first of a recording the filter's estimate (a held sample leaves it).
+    The std is the filter's, not smoothed. Absent (version 2): ``a = 0``.
 ``estimator_params``, ``fit_info``
     Hyperparameters (``get_params()``; for a ``"HierarchicalHMMGMRRegressor"``,
     ``manoeuvres`` and ``n_states`` are the lists of the manoeuvres' names and of their
@@ -344,7 +351,7 @@ def _model_dict(fitted, *, output_names, units, period):
     names = [*_inputs_of(steps[0]), *model["output_names"]]
     return {
         "format": FORMAT_NAME,
-        "format_version": FORMAT_VERSION,
+        "format_version": model["format_version"],  # the lowest that holds the regressor
         "package_version": __version__,
         "model_type": model_type,
         "training": _training({}, units, period, names),

@@ -601,15 +601,21 @@ def _validation_rmse(base, candidates, target, folds, step):
     base = (base - base.mean(axis=0)) / scale
     base = np.column_stack([np.ones(len(base)), base])
     n_base, n_outputs = base.shape[1], target.shape[1]
-    sums = {fold: _products(base[folds == fold], target[folds == fold]) for fold in used}
+    # every fold's rows, sums of products and base and target columns, once for all candidates
+    parts = {}
+    for fold in used:
+        rows = folds == fold
+        parts[fold] = (rows, base[rows], target[rows])
+    sums = {
+        fold: _products(fold_base, fold_target)
+        for fold, (_, fold_base, fold_target) in parts.items()
+    }
     rmse = []
     for column in candidates:
         column = column[finite]
         held_out = {
-            fold: _with_column(
-                sums[fold], base[folds == fold], target[folds == fold], column[folds == fold]
-            )
-            for fold in used
+            fold: _with_column(sums[fold], fold_base, fold_target, column[rows])
+            for fold, (rows, fold_base, fold_target) in parts.items()
         }
         total = sum(held_out.values())
         squared = 0.0
@@ -1052,6 +1058,7 @@ def make_torque_pipeline(
     powers=(2, 3),
     velocity_filter="auto",
     sampling_period=None,
+    output_smoothing="auto",
     **params,
 ):
     """HMM-GMR behind the steering system's derived inputs: a scikit-learn ``Pipeline``.
@@ -1081,6 +1088,11 @@ def make_torque_pipeline(
         recordings reach the transformer through ``groups`` given to the pipeline or a panel
         index.
     {sampling_period}
+    output_smoothing : None, float >= 0 or "auto", default="auto"
+        Passed to :class:`~skhmmgmr.HMMGMRRegressor`: the causal first-order read-out of
+        the estimate. By default the weakest whose estimate of the training recordings is no
+        rougher than the measured torque there (``pipeline[-1].output_smoothing_``, in rows;
+        0 when the estimate already is not); None: the filter's estimate itself.
     **params
         Any other parameter of :class:`~skhmmgmr.HMMGMRRegressor` (``random_state``,
         ``covariance_type``, ``missing_values``...).
@@ -1106,8 +1118,8 @@ def make_torque_pipeline(
     if unknown:
         raise TypeError(
             f"make_torque_pipeline got unknown parameter(s) {unknown}; it takes n_states, "
-            "friction_velocity, load_columns, powers, velocity_filter, sampling_period and "
-            "HMMGMRRegressor's "
+            "friction_velocity, load_columns, powers, velocity_filter, sampling_period, "
+            "output_smoothing and HMMGMRRegressor's "
             f"parameters {sorted(accepted)}."
         )
     return TorquePipeline(
@@ -1122,6 +1134,9 @@ def make_torque_pipeline(
                     sampling_period=sampling_period,
                 ),
             ),
-            ("hmmgmr", HMMGMRRegressor(n_states=n_states, **params)),
+            (
+                "hmmgmr",
+                HMMGMRRegressor(n_states=n_states, output_smoothing=output_smoothing, **params),
+            ),
         ]
     )

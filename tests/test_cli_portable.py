@@ -123,6 +123,11 @@ def test_fit_and_predict_of_the_regressor_keep_working(files, capsys):
     "options, message",
     [
         (["--velocity-filter", "0.1"], "--velocity-filter: for --pipeline torque only"),
+        (["--output-smoothing", "2"], "--output-smoothing: for --pipeline torque only"),
+        (
+            ["--pipeline", "torque", "--output-smoothing", "-1"],
+            "'output_smoothing' parameter of HMMGMRRegressor must be",
+        ),
         (
             ["--pipeline", "torque", "--velocity-filter", "0.1", "--time", "none"],
             "--velocity-filter needs the sampling period",
@@ -156,3 +161,23 @@ def test_metrics_need_the_target_column(files, tmp_path, capsys):
     assert main(argv) == 2
     assert "has no target column 'driver_torque'" in capsys.readouterr().err
     assert not (tmp_path / "no_target_predicted.csv").exists()
+
+
+@pytest.mark.parametrize("given, expected", [(None, "auto"), ("2.5", 2.5), ("none", None)])
+def test_fit_takes_the_read_out_of_the_torque_pipeline(files, capsys, given, expected):
+    model = files["folder"] / f"smoothed-{given}.json"
+    argv = [*FIT, "--pipeline", "torque", "--output", str(model)]
+    argv.insert(1, str(files["csv"]))
+    if given is not None:
+        argv += ["--output-smoothing", given]
+    capsys.readouterr()
+    assert main(argv) == 0
+    pipe = portable.load(model)
+    regressor = pipe[-1]
+    assert regressor.output_smoothing == expected
+    if expected == 2.5:
+        assert regressor.output_smoothing_ == pytest.approx(2.5, rel=1e-12)
+    elif expected is None:
+        assert regressor.output_smoothing_ == 0.0
+    out = capsys.readouterr().out
+    assert f"read-out time constant {regressor.output_smoothing_:g} rows" in out

@@ -129,24 +129,34 @@ def _close(actual, expected, scale, rtol=RTOL):
     return error
 
 
-# (n_states, covariance_type, inputs, outputs): K from 1 to 12, 1 to 18 raw inputs
+# (n_states, covariance_type, inputs, outputs, output_smoothing): K from 1 to 12, 1 to 18 raw
+# inputs, the GMR estimate or the first-order read-out (3 rows; and 0.5 on the yaw rate)
 REGRESSORS = {
-    "k1-full": (1, "full", FEATURE_NAMES[:2], ["driver_torque"]),
-    "k3-tied": (3, "tied", FEATURE_NAMES[:4], ["driver_torque"]),
-    "k5-full-2-outputs": (5, "full", FEATURE_NAMES[:3], ["driver_torque", "yaw_rate"]),
-    "k12-full": (12, "full", FEATURE_NAMES[:10], ["driver_torque"]),
-    "k8-tied-18": (8, "tied", list(FEATURE_NAMES), ["driver_torque"]),
+    "k1-full": (1, "full", FEATURE_NAMES[:2], ["driver_torque"], None),
+    "k3-tied": (3, "tied", FEATURE_NAMES[:4], ["driver_torque"], None),
+    "k3-full-smoothed": (3, "full", FEATURE_NAMES[:4], ["driver_torque"], 3.0),
+    "k5-full-2-outputs": (5, "full", FEATURE_NAMES[:3], ["driver_torque", "yaw_rate"], None),
+    "k5-2-outputs-smoothed": (5, "full", FEATURE_NAMES[:3], ["driver_torque", "yaw_rate"], 3.0),
+    "k12-full": (12, "full", FEATURE_NAMES[:10], ["driver_torque"], None),
+    "k8-tied-18": (8, "tied", list(FEATURE_NAMES), ["driver_torque"], None),
 }
 
 
 @pytest.fixture(scope="module", params=sorted(REGRESSORS))
 def regressor(request, protocol, tmp_path_factory):
-    n_states, covariance_type, inputs, outputs = REGRESSORS[request.param]
+    n_states, covariance_type, inputs, outputs, smoothing = REGRESSORS[request.param]
     model = HMMGMRRegressor(
-        n_states=n_states, covariance_type=covariance_type, n_iter=15, random_state=0
+        n_states=n_states,
+        covariance_type=covariance_type,
+        n_iter=15,
+        output_smoothing=smoothing,
+        random_state=0,
     )
     target = outputs[0] if len(outputs) == 1 else outputs
     model = _fit(model, protocol, list(inputs), target)
+    if request.param == "k5-2-outputs-smoothed":  # another read-out per output
+        decay = np.exp(-1.0 / np.array([3.0, 0.5]))
+        model = HMMGMRRegressor.from_fitted_model(model.model_.with_output_decay(decay))
     folder = tmp_path_factory.mktemp(request.param)
     return model, list(inputs), Compiled(model, folder)
 

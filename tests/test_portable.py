@@ -173,7 +173,7 @@ def test_missing_key_is_named(model, key):
         ("filter.regression_intercepts", [["a"]] * 5, "'filter.regression_intercepts' is not"),
         ("filter.start_probabilities", [0.5, 0.6, 0, 0, -0.1], "start_probabilities' must"),
         ("standardization.input_scale", [1.0, 0.0, 1.0], "input_scale' must be positive"),
-        ("format_version", 3, "'format_version' is 3: the file was written by a newer"),
+        ("format_version", 4, "'format_version' is 4: the file was written by a newer"),
         ("format_version", 0, "'format_version' is 0; format versions are whole numbers"),
         ("model_type", "TorquePipeline", "'model_type' is 'TorquePipeline', not one of \\["),
         ("training", {"longest_recording": 0}, "'training.longest_recording' must be a pos"),

@@ -209,7 +209,7 @@ def pipeline_dict(data, tmp_path_factory):
     [
         ("model_type", ..., "lacks the key 'model_type'"),
         ("model_type", "RandomForest", "'model_type' is 'RandomForest'; this version of skhm"),
-        ("format_version", 3, "'format_version' is 3: the file was written by a newer skhmm"),
+        ("format_version", 4, "'format_version' is 4: the file was written by a newer skhmm"),
         ("format_version", "2", "'format_version' is '2'; format versions are whole numbers"),
         ("format", "onnx", "'format' is 'onnx'"),
         ("steps", [], "'steps' must be a non-empty list"),
@@ -253,14 +253,14 @@ def test_the_regressors_shortcut_refuses_a_pipeline_file(pipeline_dict, tmp_path
 def test_an_unknown_step_type_fails_the_schema_too(pipeline_dict, validator):
     assert list(validator.iter_errors(pipeline_dict)) == []
     assert list(validator.iter_errors(edited(pipeline_dict, "steps[0].type", "StandardScaler")))
-    assert list(validator.iter_errors(edited(pipeline_dict, "format_version", 3)))
+    assert list(validator.iter_errors(edited(pipeline_dict, "format_version", 4)))
 
 
 def test_an_older_version_loads_and_a_newer_one_is_refused(data, tmp_path):
     model = HMMGMRRegressor(n_states=2, random_state=0)
     model.fit(data[INPUTS], data["driver_torque"], groups=data["recording"])
     current = model.to_dict()
-    assert current["format_version"] == portable.FORMAT_VERSION == 2
+    assert current["format_version"] == 2 and portable.FORMAT_VERSION == 3
     # version 1: the same keys without model_type and training
     older = {k: v for k, v in current.items() if k not in ("model_type", "training")}
     path = tmp_path / "v1.json"
@@ -271,7 +271,7 @@ def test_an_older_version_loads_and_a_newer_one_is_refused(data, tmp_path):
     np.testing.assert_array_equal(
         loaded.predict(data[INPUTS], groups=groups), model.predict(data[INPUTS], groups=groups)
     )
-    path.write_text(json.dumps({**current, "format_version": 3}))
+    path.write_text(json.dumps({**current, "format_version": 4}))
     with pytest.raises(ValueError, match="written by a newer skhmmgmr; this version reads forma"):
         portable.load(path)
 

@@ -1,6 +1,6 @@
 """The fitted model: one immutable object that predict, FilterStream and the JSON format read."""
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -125,6 +125,11 @@ class FittedHMMGMR:
         The inputs' variograms in standardised units, by which a model fitted with
         ``missing_values="carry_forward"`` reads a missing input through its last observed
         value (:mod:`skhmmgmr._hmm._stale_inputs`); None otherwise.
+    output_decay : array-like of shape (n_outputs,), default=None
+        Decay ``a`` in [0, 1) of the causal first-order read-out of every output: the
+        estimate is ``a * (previous estimate) + (1 - a) * (GMR estimate)``, the first of a
+        recording the GMR estimate (:mod:`skhmmgmr._hmm._readout`). None: zeros, the GMR
+        estimate itself.
 
     Attributes
     ----------
@@ -157,6 +162,7 @@ class FittedHMMGMR:
     scalar_output: bool = True
     feature_names: tuple = None
     stale_noise: object = None
+    output_decay: np.ndarray = None
     emissions: object = field(init=False, repr=False, compare=False)
     gmr: object = field(init=False, repr=False, compare=False)
 
@@ -182,6 +188,14 @@ class FittedHMMGMR:
             object.__setattr__(self, "feature_names", names)
         if self.stale_noise is not None:
             object.__setattr__(self, "stale_noise", self.stale_noise.frozen(self.n_inputs))
+        n_outputs = self.standardization.n_outputs
+        decay = _frozen(np.zeros(n_outputs) if self.output_decay is None else self.output_decay)
+        if decay.shape != (n_outputs,) or not np.all((decay >= 0) & (decay < 1)):
+            raise ValueError(
+                f"output_decay must hold {n_outputs} number(s) in [0, 1), one per output; "
+                f"got {self.output_decay!r}"
+            )
+        object.__setattr__(self, "output_decay", decay)
         # The model owns read-only copies: nobody can change it after the fact.
         data_emissions = self.data_emissions.frozen()
         scaling = self.standardization
@@ -215,6 +229,15 @@ class FittedHMMGMR:
     @property
     def covariance_type(self):
         return self.emissions.covariance_type
+
+    @property
+    def smoothed(self):
+        """Whether the read-out smooths an output (a decay above 0)."""
+        return bool(np.any(self.output_decay > 0))
+
+    def with_output_decay(self, output_decay):
+        """The same model with another read-out decay (see ``output_decay``)."""
+        return replace(self, output_decay=output_decay)
 
     def hmm_parameters(self):
         """The HMM in standardised units, as the EM engine takes it."""

@@ -25,8 +25,11 @@ from ._gaussian import NotPositiveDefiniteError
 from ._stale_inputs import MAX_LAG, StaleInputNoise
 
 FORMAT_NAME = "skhmmgmr-hmm-gmr"
-# 1: 0.1.0, the regressor only; 2: ``model_type`` (the regressor or a pipeline) and ``training``
-FORMAT_VERSION = 2
+# 1: 0.1.0, the regressor only; 2: ``model_type`` (the regressor or a pipeline) and ``training``;
+# 3: ``output_decay`` (a read-out that smooths). A file is written with the lowest version that
+# holds its model, so that a model without the newer parts stays readable by older readers.
+FORMAT_VERSION = 3
+PLAIN_VERSION, SMOOTHED_VERSION = 2, 3
 REGRESSOR_TYPE = "HMMGMRRegressor"
 # The same file, whose states are the blocks of manoeuvres (``estimator_params`` name them)
 HIERARCHICAL_TYPE = "HierarchicalHMMGMRRegressor"
@@ -81,7 +84,7 @@ def to_dict(
         estimator_params["random_state"] = None
     data = {
         "format": FORMAT_NAME,
-        "format_version": FORMAT_VERSION,
+        "format_version": SMOOTHED_VERSION if model.smoothed else PLAIN_VERSION,
         "package_version": __version__,
         "model_type": model_type,
         "n_states": int(model.n_states),
@@ -111,6 +114,8 @@ def to_dict(
         "fit_info": dict(fit_info or {}),
         "training": dict(training or {}),
     }
+    if model.smoothed:
+        data["output_decay"] = model.output_decay
     if model.stale_noise is not None:
         variances = model.stale_noise.variances
         data["stale_inputs"] = {
@@ -284,6 +289,7 @@ def read_model(data):
             scalar_output=target_ndim == 1,
             feature_names=feature_names if named else None,
             stale_noise=_stale_noise(data.get("stale_inputs"), dims["F"]),
+            output_decay=_output_decay(data, version, dims["O"]),
         )
     except (NotPositiveDefiniteError, np.linalg.LinAlgError) as exc:
         raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
@@ -396,6 +402,25 @@ def _stale_noise(block, n_inputs):
         return noise.frozen(n_inputs)
     except ValueError as exc:
         raise ValueError(f"'stale_inputs' is not usable: {exc}") from None
+
+
+def _output_decay(data, version, n_outputs):
+    """The read-out decays of a file (zeros before version 3), checked."""
+    if version < SMOOTHED_VERSION:
+        return None
+    decay = _require(data, "output_decay")
+    if (
+        not isinstance(decay, list)
+        or len(decay) != n_outputs
+        or not all(
+            isinstance(a, (int, float)) and not isinstance(a, bool) and 0 <= a < 1 for a in decay
+        )
+    ):
+        raise ValueError(
+            f"'output_decay' must be a list of {n_outputs} number(s) in [0, 1), one per output; "
+            f"got {decay!r:.100}"
+        )
+    return np.array(decay, dtype=float)
 
 
 def _joint_emissions(block, joint):

@@ -117,6 +117,7 @@ def _run_framework(args, data, meta):
                 n_jobs=args.n_jobs,
                 progress=not args.quiet,
                 random_state=args.seed,
+                screening_tol=args.screening_tol,
             )
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
@@ -317,6 +318,9 @@ TORQUE_OPTIONS = {
     "velocity_filter": "time constant [s] of a causal low-pass filter on the velocity before "
     "the friction input, restarted at every recording ('auto': none or one chosen on the "
     "training recordings, given the sampling period; 'none': no filter)",
+    "output_smoothing": "time constant [rows] of the causal first-order read-out of the "
+    "estimate ('auto': the weakest whose estimate is no rougher than the measured target on "
+    "the training recordings; 'none': the filter's estimate itself)",
 }
 
 
@@ -418,6 +422,7 @@ def command_fit(args):
                 f" (friction_velocity {model[0].friction_velocity_:g}, velocity_filter "
                 f"{model[0].velocity_filter_ or 'none'})"
             )
+        derived += f"; read-out time constant {model[-1].output_smoothing_:g} rows"
     _log(
         args,
         f"Fitted K={args.n_states} on {len(features)} input(s): {', '.join(features)}"
@@ -590,6 +595,7 @@ def _add_torque_options(parser):
         "load_columns": dict(nargs="*"),
         "powers": dict(nargs="*", type=int),
         "velocity_filter": dict(type=_setting),
+        "output_smoothing": dict(type=_setting),
     }
     for name, kind in kinds.items():
         parser.add_argument(_option(name), default=argparse.SUPPRESS, help=shown(name), **kind)
@@ -606,6 +612,12 @@ def _add_framework_options(parser, defaults=None):
     _add_output_options(parser, "skhmmgmr_report", "report folder")
     text = "accuracy/smoothness weights of every choice"
     parser.add_argument("--trade-off", default=framework["trade_off"], help=text)
+    text = (
+        "EM tolerance of the models that only screen features (the exhaustive and forward "
+        "wrappers), e.g. 1e-3; the state sweep and the final model keep the strict one "
+        "(default: the strict one everywhere)"
+    )
+    parser.add_argument("--screening-tol", type=float, default=None, help=text)
     helps = {
         "n_top": "features kept by the filter",
         "k_max": "largest number of states",

@@ -9,17 +9,14 @@ import pandas as pd
 
 from .._core._schema import FEATURE_NAMES
 from ._driver import DRIVER_STYLES
-from ._sensors import SensorStream, check_sensor_noise, draw_errors
+from ._sensors import SensorStream, draw_errors
 from ._simulator import (
     LOST_CONTROL,
     Section,
-    _check_positive,
-    _check_scenario,
-    _check_setting,
     _features,
+    checked_section_arguments,
     make_lane_keeping,
 )
-from ._vehicle import check_vehicle
 
 # The human whose parameters a model run draws (and does not use): every style draws as many
 # numbers, so the road, the manoeuvres and the sensor errors are those of any human's run.
@@ -127,13 +124,9 @@ def drive(
     >>> bool(lane_keeping_metrics(run)["lateral_deviation_max"] < 1.75)
     True
     """
-    duration = _check_positive(duration, "duration")
-    sampling_rate = _check_positive(sampling_rate, "sampling_rate")
-    speed_kmh = _check_positive(speed_kmh, "speed_kmh")
-    setting = _check_setting(setting)
-    scenario = _check_scenario(scenario)
-    check_sensor_noise(sensor_noise)
-    vehicle = check_vehicle(vehicle)
+    duration, sampling_rate, speed_kmh, setting, scenario, vehicle = checked_section_arguments(
+        duration, sampling_rate, speed_kmh, setting, scenario, sensor_noise, vehicle
+    )
     if isinstance(driver, str):
         if driver not in DRIVER_STYLES:
             raise ValueError(
@@ -166,8 +159,6 @@ def drive(
         road_random_state,
         vehicle,
     )
-    if section.n_samples < 1:
-        raise ValueError(f"duration={duration} s holds no sample at sampling_rate={sampling_rate}.")
     dt = 1.0 / sampling_rate
     scale = section.sensor_scale(sensor_noise)
     errors = None if scale is None else draw_errors(section.n_samples, dt, scale, section.rng)

@@ -27,16 +27,8 @@ import pandas as pd
 from .._core._schema import FEATURE_NAMES, RECORDING, TARGET, TIME
 from ._drive import _input_positions, sense
 from ._driver import check_driver
-from ._sensors import SensorStream, check_sensor_noise, draw_errors, measure
-from ._simulator import (
-    Section,
-    _check_positive,
-    _check_scenario,
-    _check_setting,
-    _features,
-    _simulate,
-)
-from ._vehicle import check_vehicle
+from ._sensors import SensorStream, draw_errors, measure
+from ._simulator import Section, _features, _simulate, checked_section_arguments
 
 HORIZON = "horizon"
 ESTIMATE = "estimate"
@@ -140,14 +132,10 @@ def torque_ahead(
     >>> ahead.groupby("horizon").size().to_dict()
     {0.5: 18, 1.0: 18}
     """
-    duration = _check_positive(duration, "duration")
-    sampling_rate = _check_positive(sampling_rate, "sampling_rate")
-    speed_kmh = _check_positive(speed_kmh, "speed_kmh")
-    setting = _check_setting(setting)
-    scenario = _check_scenario(scenario)
+    duration, sampling_rate, speed_kmh, setting, scenario, vehicle = checked_section_arguments(
+        duration, sampling_rate, speed_kmh, setting, scenario, sensor_noise, vehicle
+    )
     parameters = check_driver(driver)
-    vehicle = check_vehicle(vehicle)
-    check_sensor_noise(sensor_noise)
     if (
         isinstance(start_every, bool)
         or not isinstance(start_every, numbers.Integral)

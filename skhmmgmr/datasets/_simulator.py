@@ -58,6 +58,24 @@ def _check_scenario(scenario):
     return scenario
 
 
+def checked_section_arguments(
+    duration, sampling_rate, speed_kmh, setting, scenario, sensor_noise, vehicle
+):
+    """The arguments every simulation of a section shares, checked (a ValueError names the
+    argument): ``(duration, sampling_rate, speed_kmh, setting, scenario, vehicle)``, the
+    sensor noise checked too. The section must hold at least one sample."""
+    duration = _check_positive(duration, "duration")
+    sampling_rate = _check_positive(sampling_rate, "sampling_rate")
+    speed_kmh = _check_positive(speed_kmh, "speed_kmh")
+    setting = _check_setting(setting)
+    scenario = _check_scenario(scenario)
+    check_sensor_noise(sensor_noise)
+    vehicle = check_vehicle(vehicle)
+    if int(round(duration * sampling_rate)) < 1:
+        raise ValueError(f"duration={duration} s holds no sample at sampling_rate={sampling_rate}.")
+    return duration, sampling_rate, speed_kmh, setting, scenario, vehicle
+
+
 def draw_remnants(driver, n_steps, dt, rng):
     """The human driver's coloured noises over ``n_steps`` integration steps: on the desired
     angle, on the torque, and the lane wander (drawn for every driver, so that the sensor
@@ -625,16 +643,10 @@ default="highway"
     >>> frame.attrs["units"]["driver_torque"]
     'Nm'
     """
-    duration = _check_positive(duration, "duration")
-    sampling_rate = _check_positive(sampling_rate, "sampling_rate")
-    speed_kmh = _check_positive(speed_kmh, "speed_kmh")
-    setting = _check_setting(setting)
-    scenario = _check_scenario(scenario)
+    duration, sampling_rate, speed_kmh, setting, scenario, vehicle = checked_section_arguments(
+        duration, sampling_rate, speed_kmh, setting, scenario, sensor_noise, vehicle
+    )
     check_driver(driver)
-    check_sensor_noise(sensor_noise)
-    vehicle = check_vehicle(vehicle)
-    if int(round(duration * sampling_rate)) < 1:
-        raise ValueError(f"duration={duration} s holds no sample at sampling_rate={sampling_rate}.")
     args = (duration, setting, driver, speed_kmh, sampling_rate, scenario, random_state)
     args += (road_random_state, recording, split, sensor_noise, vehicle)
     seeded = isinstance(random_state, numbers.Integral) and (

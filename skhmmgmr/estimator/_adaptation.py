@@ -34,6 +34,7 @@ from .._hmm._fitted import FittedHMMGMR
 from .._hmm._gaussian import NotPositiveDefiniteError
 from .._hmm._gmr import filter_state_probabilities, gmr_estimates, mix_estimates
 from .._hmm._missing import observed_counts
+from .._hmm._readout import ahead_weights, smooth_outputs
 from ._prediction_inputs import read_inputs, read_joint_inputs
 
 ADAPTED_PARAMETERS = frozenset("mvt")
@@ -206,6 +207,7 @@ class AdaptMixin:
             scalar_output=model.scalar_output,
             feature_names=model.feature_names,
             stale_noise=model.stale_noise,
+            output_decay=model.output_decay,
         )
         jacobian = scaling.log_jacobian(observed_counts(X, Y))
         self.n_iter_, self.converged_ = n_done, converged
@@ -276,17 +278,39 @@ class AdaptMixin:
         standardized, recordings, rows, missing = read_inputs(self, X, groups, time)
         model = self.model_
         alpha = filter_state_probabilities(standardized, recordings, model.gmr, missing=missing)
-        ahead = alpha @ transition_power(model.transmat, steps)
-        if steps == 0 or state_output == "conditional":
-            estimate, std = gmr_estimates(standardized, ahead, model.gmr, return_std, missing)
-        else:
-            estimate, std = marginal_estimates(ahead, model, return_std)
+
+        def mixed(weights, with_std):
+            if steps == 0 or state_output == "conditional":
+                return gmr_estimates(standardized, weights, model.gmr, with_std, missing)
+            return marginal_estimates(weights, model, with_std)
+
+        estimate, std = mixed(alpha @ transition_power(model.transmat, steps), return_std)
         estimate = model.standardization.outputs(estimate)
+        if model.smoothed:
+            estimate = self._read_out_ahead(
+                estimate, alpha, mixed, standardized, recordings, steps, missing
+            )
         estimate = rows.to_caller_order(estimate[:, 0] if model.scalar_output else estimate)
         if not return_std:
             return estimate
         std = model.standardization.output_std(std)
         return estimate, rows.to_caller_order(std[:, 0] if model.scalar_output else std)
+
+    def _read_out_ahead(self, estimate, alpha, mixed, standardized, recordings, steps, missing):
+        """The forecast ``estimate`` of the GMR estimate, turned into that of the smoothed
+        read-out (:func:`~skhmmgmr._hmm._readout.ahead_weights`), output by output."""
+        model = self.model_
+        now, _ = gmr_estimates(standardized, alpha, model.gmr, False, missing)
+        now = smooth_outputs(model.standardization.outputs(now), recordings, model.output_decay)
+        estimate = np.array(estimate)
+        for j, decay in enumerate(model.output_decay.tolist()):
+            carried, weights = ahead_weights(model.transmat, decay, steps)
+            if weights is not None:
+                estimate[:, j] = model.standardization.outputs(mixed(alpha @ weights, False)[0])[
+                    :, j
+                ]
+            estimate[:, j] = carried * now[:, j] + (1.0 - carried) * estimate[:, j]
+        return estimate
 
 
 def _n_rows(values):

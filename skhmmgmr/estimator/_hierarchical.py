@@ -104,6 +104,8 @@ class HierarchicalHMMGMRRegressor(HMMGMRRegressor):
         Regularisation of the state covariances (see :class:`HMMGMRRegressor`).
     missing_values : {"error", "marginalize", "carry_forward"}, default="error"
         What a NaN means (see :class:`HMMGMRRegressor`).
+    output_smoothing : None, float >= 0 or "auto", default=None
+        Causal first-order read-out of the estimate (see :class:`HMMGMRRegressor`).
     random_state : int, RandomState instance or None, default=None
         Seed of the initialisations.
     verbose : int, default=0
@@ -129,7 +131,8 @@ class HierarchicalHMMGMRRegressor(HMMGMRRegressor):
         Probability of every manoeuvre at the start of a recording.
     startprob_, transmat_, means_, covars_, model_, n_features_in_, feature_names_in_, \
 n_outputs_, n_iter_, converged_, log_likelihood_, log_likelihood_history_, \
-penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
+penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_, \
+output_smoothing_
         Those of the flat HMM, as in :class:`HMMGMRRegressor` (``n_iter_`` and the histories
         are those of the joint EM).
 
@@ -178,6 +181,7 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
         init_params="kmeans",
         reg_covar=1e-6,
         missing_values="error",
+        output_smoothing=None,
         random_state=None,
         verbose=0,
     ):
@@ -192,6 +196,7 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
         self.init_params = init_params
         self.reg_covar = reg_covar
         self.missing_values = missing_values
+        self.output_smoothing = output_smoothing
         self.random_state = random_state
         self.verbose = verbose
 
@@ -561,15 +566,20 @@ penalized_log_likelihood_, penalized_log_likelihood_history_, longest_recording_
         given = cls(**params)
         estimator = super().from_fitted_model(model, **params)
         estimator.n_states = given.n_states
-        names = estimator._names()
-        sizes = estimator._sizes(names)
-        if sum(sizes) != model.n_states:
+        return estimator._restore_structure()
+
+    def _restore_structure(self):
+        """Set the manoeuvres' blocks of a model built around a flat fitted state from the
+        parameters (``manoeuvres``, ``n_states``), checked against its states; ``self``."""
+        names = self._names()
+        sizes = self._sizes(names)
+        if sum(sizes) != self.model_.n_states:
             raise ValueError(
-                f"the model has {model.n_states} states; manoeuvres={names} with n_states="
-                f"{sizes} make {sum(sizes)}"
+                f"the model has {self.model_.n_states} states; manoeuvres={names} with "
+                f"n_states={sizes} make {sum(sizes)}"
             )
-        estimator._set_structure(names, sizes)
-        return estimator
+        self._set_structure(names, sizes)
+        return self
 
     def to_dict(self, *, output_names=None):
         """The fitted model as a JSON-ready dict (the portable model format).

@@ -22,9 +22,10 @@ from .._hmm._em_data import Columns
 from .._hmm._em_init import INIT_METHODS
 from .._hmm._emissions import EMISSION_FAMILIES, REFUSED_COVARIANCE_TYPES, emission_family
 from .._hmm._fitted import FittedHMMGMR, Standardization
-from .._hmm._gmr import filter_state_probabilities, gmr_estimates
+from .._hmm._gmr import filter_state_probabilities, gmr_estimates, read_missing
 from .._hmm._missing import observed_counts
-from .._hmm._stale_inputs import MISSING_VALUES, learn_stale_noise
+from .._hmm._readout import decay_of, smooth_outputs, time_constant_of, weakest_decay
+from .._hmm._stale_inputs import MISSING_VALUES, learn_stale_noise, stale_noise_for
 from ._adaptation import AdaptMixin
 from ._io import ModelIOMixin
 from ._prediction_inputs import read_inputs, read_joint_inputs
@@ -87,6 +88,17 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         value in the recording, as a noisy observation whose variance is the variogram at its
         age (marginalised when there is none, or older than 128 samples). Infinities are
         refused either way. See the user guide, "Missing inputs".
+    output_smoothing : None, float >= 0 or "auto", default=None
+        Time constant ``tau``, in rows, of a causal first-order read-out of the GMR estimate:
+        ``estimate_t = a estimate_{t-1} + (1 - a) GMR_t`` with ``a = exp(-1 / tau)``,
+        restarted at every recording (the first estimate is the GMR one). The same read-out
+        runs in :class:`~skhmmgmr.FilterStream`, the model file and the generated C. "auto":
+        ``fit`` chooses, per output, the weakest read-out whose estimate of the training
+        recordings is no rougher than the measured output there (the thesis' smoothness,
+        :func:`~skhmmgmr.metrics.smoothness_score`); none when the GMR estimate already is
+        not. None or 0: the GMR estimate itself (the thesis' model). ``return_std`` gives
+        the model's predictive standard deviation either way. See the user guide, "Smooth
+        by design".
     random_state : int, RandomState instance or None, default=None
         Seed of the initialisation, for reproducible fits.
     verbose : int, default=0
@@ -121,6 +133,9 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         Whether the kept initialisation converged.
     log_likelihood_ : float
         Log-likelihood of the training recordings under the fitted parameters.
+    output_smoothing_ : float or ndarray of shape (n_outputs,)
+        Time constant in rows of the read-out of every output (``output_smoothing``, or the
+        one "auto" chose; 0: none): a float for a 1-D target.
     log_likelihood_history_ : ndarray
         Log-likelihood before every M-step of the kept initialisation, then that of the
         fitted parameters. EM maximises the penalised log-likelihood, not this: it may fall
@@ -177,6 +192,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         "init_params": [StrOptions(set(INIT_METHODS))],
         "reg_covar": [Interval(Real, 0, None, closed="left")],
         "missing_values": [StrOptions(set(MISSING_VALUES))],
+        "output_smoothing": [None, Interval(Real, 0, None, closed="left"), StrOptions({"auto"})],
         "random_state": ["random_state"],
         "verbose": ["verbose"],
     }
@@ -200,6 +216,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         init_params="kmeans",
         reg_covar=1e-6,
         missing_values="error",
+        output_smoothing=None,
         random_state=None,
         verbose=0,
     ):
@@ -211,6 +228,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         self.init_params = init_params
         self.reg_covar = reg_covar
         self.missing_values = missing_values
+        self.output_smoothing = output_smoothing
         self.random_state = random_state
         self.verbose = verbose
 
@@ -282,6 +300,8 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
             feature_names=getattr(self, "feature_names_in_", None),
             stale_noise=stale_noise,
         )
+        if self.output_smoothing is not None:
+            self.model_ = self.model_.with_output_decay(self._output_decay(inputs))
         jacobian = self.model_.standardization.log_jacobian(observed_counts(inputs.X, inputs.Y))
         self.n_iter_ = result.n_iter
         self.converged_ = result.converged
@@ -301,6 +321,27 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
                     f"EM iteration {i}: log-likelihood {value:.6f}, "
                     f"penalised log-likelihood {objective:.6f}"
                 )
+
+    def _output_decay(self, inputs):
+        """Decay of the read-out of every output: of ``output_smoothing``, or for "auto" the
+        weakest that makes the estimate of the training ``inputs`` no rougher than their
+        outputs."""
+        n_outputs = inputs.Y.shape[1]
+        if self.output_smoothing != "auto":
+            if not np.isfinite(self.output_smoothing):
+                raise ValueError(
+                    "output_smoothing must be None, 'auto' or a finite time constant >= 0 "
+                    f"(in rows); got {self.output_smoothing!r}"
+                )
+            return np.full(n_outputs, decay_of(float(self.output_smoothing)))
+        model, recordings = self.model_, inputs.recordings
+        standardized = model.standardization.inputs(inputs.X)
+        noise = stale_noise_for(model, self.missing_values)
+        missing = read_missing(standardized, recordings, noise)
+        alpha = filter_state_probabilities(standardized, recordings, model.gmr, missing=missing)
+        estimate, _ = gmr_estimates(standardized, alpha, model.gmr, False, missing=missing)
+        estimate = model.standardization.outputs(estimate)
+        return weakest_decay(estimate, inputs.Y, recordings)
 
     def _baum_welch(self, columns, recordings):
         # The one place the EM engine is called (a reference engine can stand in for it).
@@ -337,6 +378,12 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         check_is_fitted(self)
         return np.array(self.model_.data_emissions.state_covariances())
 
+    @property
+    def output_smoothing_(self):
+        check_is_fitted(self)
+        constants = np.array([time_constant_of(a) for a in self.model_.output_decay.tolist()])
+        return float(constants[0]) if self.model_.scalar_output else constants
+
     def predict_state_proba(self, X, groups=None, time=None):
         """Filtered state probabilities ``alpha_t,k`` given the inputs up to each row.
 
@@ -371,7 +418,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
             Optional time stamps, checked to increase within every recording.
         return_std : bool, default=False
             Also return the predictive standard deviation (law of total variance over the
-            filtered mixture).
+            filtered mixture; not smoothed by ``output_smoothing``).
 
         Returns
         -------
@@ -383,6 +430,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         alpha = filter_state_probabilities(standardized, recordings, model.gmr, missing=missing)
         estimate, std = gmr_estimates(standardized, alpha, model.gmr, return_std, missing=missing)
         estimate = model.standardization.outputs(estimate)
+        estimate = smooth_outputs(estimate, recordings, model.output_decay)
         estimate = rows.to_caller_order(estimate[:, 0] if model.scalar_output else estimate)
         if not return_std:
             return estimate

@@ -18,7 +18,9 @@ The generated code runs, sample by sample, what :class:`~skhmmgmr.FilterStream` 
    ``alpha ∝ prior * b``, from ``b`` alone when every product is zero, then
    ``prior = A^T alpha`` for the next sample;
 5. the states' conditional output means and their mixture, and on request the predictive std
-   (law of total variance) at the last accepted sample, or the prior mixture before any.
+   (law of total variance) at the last accepted sample, or the prior mixture before any;
+6. for a model whose read-out smooths, the first-order read-out of the mixture
+   (``output_decay``, :mod:`skhmmgmr._hmm._readout`), in double precision.
 
 A held sample leaves the filter state unchanged and returns the last estimate. The state is one
 struct the caller owns (no heap, no globals written), so several recordings can be filtered at
@@ -182,6 +184,10 @@ def _parameters(spec, dtype):
         ("conditional_variances", spec.conditional_variances, None),
     ]
     parts += [_array(n, real, v, suffix, c) for n, v, c in own]
+    if spec.smoothed:
+        decay = spec.output_decay
+        parts.append(_array("output_decay", "double", decay, comment="first-order read-out"))
+        parts.append(_array("output_gain", "double", 1.0 - decay))
     derived = spec.derived
     if derived.friction is not None:
         parts.append(f"static const double friction_velocity = {_number(derived.friction[1])};\n")
@@ -356,6 +362,14 @@ def source(spec, name, dtype):
     else:
         gather = ""
         source_of_z = "inputs"
+    remember_started = ""
+    read_out = "        state->estimate[o] = (double)mixed * output_scale[o] + output_center[o];"
+    if spec.smoothed:  # the first-order read-out, from the GMR estimate of a recording's first
+        remember_started = "    const int started = state->started;\n"
+        read_out = """\
+        const double gmr = (double)mixed * output_scale[o] + output_center[o];
+        state->estimate[o] = started ? output_gain[o] * gmr + output_decay[o] * state->estimate[o]
+                                     : gmr;"""
     return f"""\
 /* {name}.c: causal HMM-GMR filter of a fitted skhmmgmr model (C99), see {name}.h.
  *
@@ -510,13 +524,13 @@ int {name}_update({name}_state *state, const double *inputs, double *estimate, d
         state->prior[k] = next;
     }}
     output_means(z, state->means);
-    state->started = 1;
+{remember_started}    state->started = 1;
     for (o = 0; o < {n_outputs}; ++o) {{
         {real} mixed = 0;
         for (k = 0; k < {n_states}; ++k) {{
             mixed += state->alpha[k] * state->means[k * {n_outputs} + o];
         }}
-        state->estimate[o] = (double)mixed * output_scale[o] + output_center[o];
+{read_out}
         estimate[o] = state->estimate[o];
     }}
     if (std != NULL) {{

@@ -73,6 +73,11 @@ class ExportedFilter:
     intercept: np.ndarray
     conditional_variances: np.ndarray
     min_log_density: float
+    output_decay: np.ndarray  # the first-order read-out (skhmmgmr._hmm._readout)
+
+    @property
+    def smoothed(self):
+        return bool(np.any(self.output_decay > 0))
 
     @property
     def n_raw_inputs(self):
@@ -240,6 +245,7 @@ def read_filter(fitted):
         intercept=np.array(params.intercept),
         conditional_variances=np.array(params.conditional_variances),
         min_log_density=math.log(np.finfo(float).tiny),
+        output_decay=np.array(model.output_decay),
     )
     for field in ("gating", "offsets", "norms", "coef", "intercept", "conditional_variances"):
         if not np.all(np.isfinite(getattr(exported, field))):

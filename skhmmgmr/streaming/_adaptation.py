@@ -150,6 +150,7 @@ class OnlineMeans:
             scalar_output=model.scalar_output,
             feature_names=model.feature_names,
             stale_noise=model.stale_noise,
+            output_decay=model.output_decay,
         )
 
     def gmr(self):

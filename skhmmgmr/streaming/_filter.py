@@ -121,6 +121,12 @@ class FilterStream:
 
     No NaN or infinity ever comes out of :meth:`update`.
 
+    A model whose read-out smooths (``output_smoothing`` of the regressor) gives the
+    smoothed estimate, as ``predict`` does: ``a * (previous estimate) + (1 - a) * (GMR
+    estimate)`` at every accepted sample, the GMR estimate at the first of a recording. A held
+    sample leaves the read-out as it is; ``return_std`` gives the model's predictive standard
+    deviation, not smoothed.
+
     Online adaptation (``relevance`` given): an update given the measured ``target`` returns
     the current model's estimate, then moves the state means by the MAP rule of ``adapt``
     (fitted means as the prior), recursively, from decayed statistics of the filtered state
@@ -212,6 +218,10 @@ class FilterStream:
         self._output_center = np.array(scaling.output_center)
         self._output_scale = np.array(scaling.output_scale)
         self._center_0, self._scale_0 = float(self._output_center[0]), float(self._output_scale[0])
+        # The causal first-order read-out of the GMR estimate (skhmmgmr._hmm._readout).
+        self._smoothed = model.smoothed
+        self._decay = np.array(model.output_decay)
+        self._decay_0 = float(self._decay[0])
         self._startprob = np.array(params.startprob, dtype=float)
         # A^T @ alpha is a faster BLAS call than alpha @ A for these tiny sizes.
         self._transmat_t = np.ascontiguousarray(params.transmat.T, dtype=float)
@@ -272,6 +282,10 @@ class FilterStream:
         # a stream pickled before pipelines streamed reads the regressor's rows
         self.__dict__.setdefault("_stages", ())
         self.__dict__.setdefault("_row_shape", (n_inputs,))
+        # a stream pickled before the smoothed read-out reads the GMR estimate
+        self.__dict__.setdefault("_smoothed", False)
+        self.__dict__.setdefault("_decay", np.zeros(self._output_center.shape[0]))
+        self.__dict__.setdefault("_decay_0", 0.0)
         self._z_inputs, self._squares_head = self._z[:n_inputs], self._squares[:n_whitened]
         width = self._weights.shape[1]
         self._work = self._product_buffer(width, n_whitened, self._work[0])
@@ -429,12 +443,17 @@ class FilterStream:
         np.multiply(alpha, 1.0 / total, out=alpha)
         np.dot(self._transmat_t, alpha, out=self._prior)
         self._work, self._accepted = self._accepted, self._work
-        self._started = True
+        smooth, self._started = self._smoothed and self._started, True
         if self._scalar_output:
             estimate = float(np.dot(alpha, means)) * self._scale_0 + self._center_0
+            if smooth:
+                decay = self._decay_0
+                estimate = (1.0 - decay) * estimate + decay * self._last_estimate
             self._last_estimate = estimate
         else:
             estimate = np.dot(alpha, means) * self._output_scale + self._output_center
+            if smooth:
+                estimate = (1.0 - self._decay) * estimate + self._decay * self._last_estimate
             self._last_estimate = estimate.copy()
         return estimate
 
