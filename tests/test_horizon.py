@@ -33,14 +33,22 @@ def preview_model():
     return HMMGMRRegressor(n_states=3, random_state=0).fit(human[PREVIEW], human["driver_torque"])
 
 
+# A car with a torsion bar of 2 Nm/deg (its lower column is a state the log does not hold).
+TORSION_BAR = {"column_stiffness": 2.0 * 180.0 / np.pi, "column_damping": 0.05}
+
+
+@pytest.mark.parametrize("vehicle", [None, TORSION_BAR], ids=["rigid", "torsion-bar"])
 @pytest.mark.parametrize("sensor_noise", [None, 1.0])
 @pytest.mark.parametrize("start", [0, 37, 180])
-def test_a_rollout_with_fixed_torques_is_a_plain_run_from_the_same_state(sensor_noise, start):
+def test_a_rollout_with_fixed_torques_is_a_plain_run_from_the_same_state(
+    sensor_noise, start, vehicle
+):
     # A plain run of the simulator with a fixed torque sequence, measured by the batch logger.
     duration, n_rows = 5.0, 40
     torques = np.cumsum(np.random.default_rng(3).normal(0.0, 0.05, int(duration * RATE)))
-    section = Section(duration, 7, "defensive", 100.0, RATE, "highway", 5, 7)
-    log = section.simulate(lambda row, states: torques[row])
+    section = Section(duration, 7, "defensive", 100.0, RATE, "highway", 5, 7, vehicle)
+    column = np.empty((section.n_samples, 2))
+    log = section.simulate(lambda row, states: torques[row], column_log=column)
     measured, _, errors = measured_log(section, log, sensor_noise)
     state = log[start].copy()
 
@@ -53,7 +61,7 @@ def test_a_rollout_with_fixed_torques_is_a_plain_run_from_the_same_state(sensor_
         sensed.append(sensed_row)
         return torques[start + row]
 
-    out = rollout(section, log, start, n_rows, sensors, replay)
+    out = rollout(section, log, start, n_rows, sensors, replay, column)
     assert_allclose(out, log[start : start + n_rows], rtol=0, atol=1e-10)
     assert_allclose(np.array(sensed[1:]), measured[start + 1 : start + n_rows], rtol=0, atol=1e-10)
     assert_array_equal(log[start], state)  # the start state is read, not changed

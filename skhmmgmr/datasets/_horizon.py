@@ -160,7 +160,8 @@ def torque_ahead(
         vehicle,
     )
     scale = section.sensor_scale(sensor_noise)
-    log = section.simulate()
+    column = np.empty((section.n_samples, 2))  # the lower column's state, for the rollouts
+    log = section.simulate(column_log=column)
     sensed, torque, errors = measured_log(section, log, scale)
 
     n_ahead = max(rows_ahead)
@@ -177,7 +178,7 @@ def torque_ahead(
             continue
         copied = copy.deepcopy(stream)  # the rollout goes on from the filter state at t
         path, path_proba = _torque_path(
-            section, log, sensed, errors, scale, t, n_ahead, estimate, copied, positions
+            section, log, column, sensed, errors, scale, t, n_ahead, estimate, copied, positions
         )
         estimates[next_start] = path[np.minimum(columns, len(path) - 1)]
         lost[next_start] = columns >= len(path)
@@ -255,9 +256,12 @@ def _check_horizons(horizons, sampling_rate, n_samples):
     return values, [int(r) for r in whole]
 
 
-def _torque_path(section, log, sensed, errors, scale, start, n_ahead, first, stream, positions):
-    """The rollout from row ``start``: the torques of its rows (the first is ``first``) and
-    the state probabilities of ``stream`` (updated in place) after each."""
+def _torque_path(
+    section, log, column, sensed, errors, scale, start, n_ahead, first, stream, positions
+):
+    """The rollout from row ``start`` (``column``: the lower column's logged states): the
+    torques of its rows (the first is ``first``) and the state probabilities of ``stream``
+    (updated in place) after each."""
     sensors = SensorStream(FEATURE_NAMES, errors, 1.0 / section.sampling_rate, section.speed, scale)
     sensors.continue_from(dict(zip(FEATURE_NAMES, sensed[start], strict=True)))
     torques = [first]
@@ -271,18 +275,22 @@ def _torque_path(section, log, sensed, errors, scale, start, n_ahead, first, str
         proba.append(stream.state_proba_)
         return torque
 
-    rollout(section, log, start, n_ahead + 1, sensors, torque_of)
+    rollout(section, log, start, n_ahead + 1, sensors, torque_of, column)
     return np.array(torques), np.array(proba)
 
 
-def rollout(section, log, start, n_rows, sensors, torque_of):
+def rollout(section, log, start, n_rows, sensors, torque_of, column=None):
     """Integrate ``section``'s vehicle from the state logged at row ``start`` of ``log`` for
     ``n_rows`` samples (fewer if it loses control), the torque of every sample period given by
     ``torque_of(row, sensed_row)``: ``row`` counts from 0 at ``start``, ``sensed_row`` is what
     ``sensors`` measure at row ``start + row`` (``None`` at row 0, whose measured row is the
-    recording's). Returns the rollout's log (rows of ``log``'s columns)."""
+    recording's). ``column``: the lower column's states logged with ``log`` (``column_log``
+    of the simulation), which a car with a torsion bar starts from; without it the column
+    starts at the bar's static twist. Returns the rollout's log (rows of ``log``'s columns)."""
     previous = log[start - 1, _TORQUE_COLUMN] if start > 0 else 0.0
     initial = (*log[start, _STATE_COLUMNS], previous)
+    if column is not None:
+        initial += tuple(column[start])
     n_sub = section.n_sub
 
     def torque_source(row, states):

@@ -99,6 +99,7 @@ def _simulate(
     remnants,
     torque_source=None,
     initial=None,
+    column_log=None,
 ):
     """Integrate the closed loop with semi-implicit Euler; return logged states (n_samples, 14).
 
@@ -110,9 +111,12 @@ def _simulate(
 
     ``initial`` (with a ``torque_source`` only): start from a logged state instead of rest,
     ``(theta, theta_d, theta_dd, v, r, phi, phi_d, s, e_y, e_psi, t_driver)`` with the driver
-    torque of the integration step before (which sets the power assist's gain). With a torsion
-    bar the lower column starts at the bar's static twist under that torque, turning with the
-    wheel (the log holds no column state).
+    torque of the integration step before (which sets the power assist's gain), followed, with
+    a torsion bar, by the lower column's ``(theta_c, theta_c_d)`` at that sample (from
+    ``column_log``); without them the lower column starts at the bar's static twist under that
+    torque, turning with the wheel (exact at rest only).
+    ``column_log``: an array (n_samples, 2) that receives ``(theta_c, theta_c_d)`` at every
+    logged sample (with a torsion bar; the rigid column writes the wheel's angle and velocity).
     The logged torque is the torque sensor's: the driver's (the human's, or the torque
     source's) with a rigid column; the torsion bar's ``k_c (theta - theta_c) + c_c (theta' -
     theta_c')`` at the sample with a ``column_stiffness``, ``theta_c`` being the lower
@@ -184,11 +188,13 @@ def _simulate(
     if initial is not None:
         if torque_source is None:
             raise ValueError("initial needs a torque_source (a human starts at rest)")
-        theta, theta_d, theta_dd, v, r, phi, phi_d, s, e_y, e_psi, t_driver = map(float, initial)
-        if compliant:
-            # The log holds no lower-column state: take the torsion bar's static twist under
-            # the logged torque, turning with the wheel (exact at rest, an approximation when
-            # the column twists dynamically).
+        values = tuple(map(float, initial))
+        theta, theta_d, theta_dd, v, r, phi, phi_d, s, e_y, e_psi, t_driver = values[:11]
+        if compliant and len(values) == 13:
+            theta_c, theta_c_d = values[11:]
+        elif compliant:
+            # No lower-column state given: the torsion bar's static twist under the logged
+            # torque, turning with the wheel (exact at rest only).
             theta_c, theta_c_d = theta - t_driver / k_col, theta_d
     delay_line = [0.0] * n_delay
     log = np.empty((n_samples, 14))
@@ -252,6 +258,8 @@ def _simulate(
         e_y_d = u * sin(e_psi) + v * cos(e_psi)
         if compliant:  # the torque sensor reads the torsion bar
             t_driver = k_col * (theta - theta_c) + c_col * (theta_d - theta_c_d)
+        if column_log is not None and sample:  # the lower column with the logged states
+            column_log[row] = (theta_c, theta_c_d) if compliant else (theta, theta_d)
         if torque_source is not None and sample:
             states = (theta, theta_d, theta_dd, v, a_y, r, r_d, phi, phi_d, phi_dd, s, e_y, e_psi)
             t_hand = torque_source(row, states)
@@ -396,7 +404,7 @@ class Section:
             self.parameters, self.n_samples * self.n_sub, self.dt, self.rng
         )
 
-    def simulate(self, torque_source=None):
+    def simulate(self, torque_source=None, column_log=None):
         """The logged states of the closed loop (see :func:`_simulate`)."""
         return _simulate(
             self.road,
@@ -409,6 +417,7 @@ class Section:
             self.dt,
             self.remnants,
             torque_source,
+            column_log=column_log,
         )
 
     def sensor_scale(self, sensor_noise):
