@@ -7,9 +7,9 @@ fitted on the training recordings and scored on the test recordings:
 
 - ``HistGradientBoostingRegressor(max_iter=300)`` on the 18 features (the baseline);
 - ``make_torque_pipeline`` with the settings of before (``friction_velocity=0.1``, no velocity
-  filter: ``fixed 0.1``) and with the settings chosen in ``fit`` (``"auto"``, the defaults now;
-  the chosen friction band and filter are printed), the number of states of each chosen
-  among ``--states`` by mean validation accuracy;
+  filter, no read-out: ``fixed 0.1``) and with the derived inputs chosen in ``fit``
+  (``"auto"``; the chosen friction band and filter are printed) without the read-out, the
+  number of states of each chosen among ``--states`` by mean validation accuracy;
 - the same with the causal first-order read-out of the estimate chosen in ``fit``
   (``output_smoothing="auto"``, the default of ``make_torque_pipeline`` now: the weakest whose
   roughness on the training recordings is at most the measured torque's own; the chosen time
@@ -144,6 +144,7 @@ def run(vehicle, rate, seed, states, duration, cache):
             friction_velocity=0.1,
             velocity_filter=None,
             sampling_period=period,
+            output_smoothing=None,
             random_state=0,
         ),
         train,

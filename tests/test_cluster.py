@@ -262,6 +262,26 @@ def test_fit_on_cluster_refuses_a_recording_split_over_partitions(cluster, fit_d
         fit_on_cluster(HMMGMRRegressor(n_states=2), parts, features=["f0"], client=client)
     with pytest.raises(ValueError, match="init_params='random'"):
         fit_on_cluster(HMMGMRRegressor(init_params="random"), parts, features=["f0"], client=client)
+    for smoothing, message in (("auto", "output_smoothing=None or a finite"), (-1.0, "output_smo")):
+        with pytest.raises(ValueError, match=message):
+            model = HMMGMRRegressor(output_smoothing=smoothing)
+            fit_on_cluster(model, parts, features=["f0"], client=client)
+
+
+def test_fit_on_cluster_keeps_the_read_out(cluster, fit_data):
+    features, params = ["f0", "f1"], dict(n_states=2, random_state=0, output_smoothing=3.0)
+    local = HMMGMRRegressor(**params).fit(
+        fit_data[features], fit_data["driver_torque"], groups=fit_data["recording"]
+    )
+    parts = [fit_data[fit_data["recording"].isin(["train0", "train1"])]]
+    parts.append(fit_data[~fit_data["recording"].isin(["train0", "train1"])])
+    with distributed.Client(cluster) as client:
+        remote = fit_on_cluster(HMMGMRRegressor(**params), parts, features=features, client=client)
+    assert remote.output_smoothing_ == pytest.approx(3.0, rel=1e-12)
+    frame, groups = fit_data[features], fit_data["recording"]
+    np.testing.assert_allclose(
+        remote.predict(frame, groups=groups), local.predict(frame, groups=groups), atol=1e-9
+    )
 
 
 def test_select_command_on_a_scheduler_writes_the_local_tables(cluster, tmp_path, capsys):

@@ -16,6 +16,7 @@ Two ways past one machine:
   (:mod:`skhmmgmr.cluster._em`).
 """
 
+import math
 import os
 import warnings
 from contextlib import contextmanager
@@ -24,6 +25,7 @@ import numpy as np
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_random_state
 
+from .._core._compat import validate_parameter_constraints
 from .._core._schema import TARGET
 from .._core._validation import check_column_scales, check_enough_rows
 from .._hmm._em import EMResult, HMMParameters, em_failure, m_step
@@ -31,6 +33,7 @@ from .._hmm._em_init import initial_centers
 from .._hmm._emissions import emission_family
 from .._hmm._fitted import FittedHMMGMR, Standardization
 from .._hmm._gaussian import NotPositiveDefiniteError
+from .._hmm._readout import decay_of
 from ._em import (
     SpreadRows,
     load_partition,
@@ -227,6 +230,11 @@ def _fit_spread(client, shards, counts, estimator):
 
 
 def _check_supported(estimator):
+    validate_parameter_constraints(
+        type(estimator)._parameter_constraints,
+        estimator.get_params(deep=False),
+        caller_name=type(estimator).__name__,
+    )
     emission_family(estimator.covariance_type)
     if estimator.init_params == "random":
         raise ValueError(
@@ -235,6 +243,12 @@ def _check_supported(estimator):
         )
     if estimator.missing_values != "error":
         raise ValueError("fit_on_cluster refuses missing values (missing_values='error')")
+    smoothing = estimator.output_smoothing
+    if smoothing == "auto" or (smoothing is not None and not math.isfinite(smoothing)):
+        raise ValueError(
+            f"fit_on_cluster takes output_smoothing=None or a finite time constant in rows, "
+            f"got {smoothing!r}: 'auto' would need every training estimate on the client"
+        )
 
 
 def fit_on_cluster(estimator, data, *, features, target=TARGET, client=None):
@@ -317,6 +331,7 @@ def fit_on_cluster(estimator, data, *, features, target=TARGET, client=None):
         Standardization(center, scale, len(features)),
         scalar_output=True,
         feature_names=estimator.feature_names_in_,
+        output_decay=[decay_of(float(estimator.output_smoothing or 0.0))],
     )
     jacobian = estimator.model_.standardization.log_jacobian(sum(counts))
     estimator.n_iter_, estimator.converged_ = result.n_iter, result.converged
