@@ -1,6 +1,7 @@
 """The command line, run in-process: demo/select reports, report re-render, fit/predict, errors."""
 
 import argparse
+import functools
 import inspect
 import json
 
@@ -212,6 +213,7 @@ def test_select_hands_the_screening_tolerance_to_the_framework(tmp_path, capsys,
 
     given = {}
 
+    @functools.wraps(skhmmgmr.selection.select_parameters)  # the defaults the options show
     def recorded(*args, **kwargs):
         given.update(kwargs)
         raise ValueError("stopped after the call")

@@ -104,6 +104,8 @@ def test_a_0_1_0_pickle_loads_and_predicts_the_same(expected):
     model, stream = saved["regressor"], saved["stream"]
     assert isinstance(model, HMMGMRRegressor)
     assert isinstance(stream, FilterStream)
+    # 0.1.0 had no read-out: none, and the parameters are complete
+    assert model.get_params()["output_smoothing"] is None and model.output_smoothing_ == 0.0
     X, groups = expected["X_gaps"], expected["groups"]
     mean, std = model.predict(X, groups=groups, return_std=True)
     assert_same(mean, expected, "carry_forward_direct_mean")

@@ -48,6 +48,7 @@ def test_init_stores_parameters_verbatim():
         "init_params": "kmeans",
         "reg_covar": 1e-3,
         "missing_values": "error",
+        "output_smoothing": None,
         "random_state": 4,
         "verbose": 0,
     }

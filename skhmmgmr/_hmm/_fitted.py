@@ -207,6 +207,13 @@ class FittedHMMGMR:
         gmr = condition_on_inputs(startprob, transmat, emissions, self.n_inputs)
         object.__setattr__(self, "gmr", gmr)
 
+    def __setstate__(self, state):
+        """Unpickle; a model pickled before the read-out had none (zero decays)."""
+        for name, value in state.items():
+            object.__setattr__(self, name, value)
+        if "output_decay" not in state:
+            object.__setattr__(self, "output_decay", _frozen(np.zeros(self.n_outputs)))
+
     @classmethod
     def from_standardized(cls, startprob, transmat, emissions, standardization, **kwargs):
         """The model of an HMM whose ``emissions`` are over the standardised columns."""

@@ -17,6 +17,7 @@ Two ways past one machine:
 """
 
 import math
+import numbers
 import os
 import warnings
 from contextlib import contextmanager
@@ -25,7 +26,6 @@ import numpy as np
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_random_state
 
-from .._core._compat import validate_parameter_constraints
 from .._core._schema import TARGET
 from .._core._validation import check_column_scales, check_enough_rows
 from .._hmm._em import EMResult, HMMParameters, em_failure, m_step
@@ -230,11 +230,6 @@ def _fit_spread(client, shards, counts, estimator):
 
 
 def _check_supported(estimator):
-    validate_parameter_constraints(
-        type(estimator)._parameter_constraints,
-        estimator.get_params(deep=False),
-        caller_name=type(estimator).__name__,
-    )
     emission_family(estimator.covariance_type)
     if estimator.init_params == "random":
         raise ValueError(
@@ -244,10 +239,13 @@ def _check_supported(estimator):
     if estimator.missing_values != "error":
         raise ValueError("fit_on_cluster refuses missing values (missing_values='error')")
     smoothing = estimator.output_smoothing
-    if smoothing == "auto" or (smoothing is not None and not math.isfinite(smoothing)):
+    if smoothing is not None and not (
+        isinstance(smoothing, numbers.Real) and math.isfinite(smoothing) and smoothing >= 0
+    ):
         raise ValueError(
-            f"fit_on_cluster takes output_smoothing=None or a finite time constant in rows, "
-            f"got {smoothing!r}: 'auto' would need every training estimate on the client"
+            f"fit_on_cluster takes output_smoothing=None or a finite time constant >= 0 in "
+            f"rows, got {smoothing!r} ('auto' would need every training estimate on the "
+            "client)"
         )
 
 

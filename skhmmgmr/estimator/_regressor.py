@@ -270,6 +270,10 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         self._set_fitted(result, inputs, scaling, stale_noise)
         return self
 
+    def __setstate__(self, state):
+        # an estimator pickled before ``output_smoothing`` existed had none
+        super().__setstate__({"output_smoothing": None, **state})
+
     def _standardized(self, inputs, n_states):
         """``(columns, (center, scale), stale_noise)`` of the joint ``inputs`` of a fit of
         ``n_states`` states, with the attributes read from the data (``n_outputs_``,
