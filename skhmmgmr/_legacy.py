@@ -15,47 +15,74 @@ import importlib.abc
 import importlib.util
 import sys
 
+# 0.1.0's private modules, by the package that holds their code now: {package: {old name
+# under skhmmgmr: module name in the package}}.
+_MOVES = {
+    "skhmmgmr._core": {
+        "_compat": "_compat",
+        "_docstrings": "_docstrings",
+        "_validation": "_validation",
+        "_sequences": "_sequences",
+        "_panel": "_panel",
+        "datasets._schema": "_schema",
+    },
+    "skhmmgmr._hmm": {
+        "_kernels": "_kernels",
+        "_gaussian": "_gaussian",
+        "_emissions": "_emissions",
+        "_missing": "_missing",
+        "_stale_inputs": "_stale_inputs",
+        "_fused_estep": "_fused_estep",
+        "_em": "_em",
+        "_em_data": "_em_data",
+        "_em_init": "_em_init",
+        "_gmr": "_gmr",
+        "_fitted": "_fitted",
+        "_hmmlearn": "_hmmlearn",
+    },
+    "skhmmgmr.estimator": {
+        "_estimator_io": "_io",
+        "_prediction_inputs": "_prediction_inputs",
+        "_adaptation": "_adaptation",
+    },
+    "skhmmgmr.metrics": {
+        "_metrics_scorers": "_scorers",
+        "_metrics_table": "_table",
+    },
+    "skhmmgmr.streaming": {
+        "_stream_inputs": "_inputs",
+        "_stream_adaptation": "_adaptation",
+    },
+    "skhmmgmr.cluster": {
+        "_cluster_search": "_scatter",
+        "_cluster_em": "_em",
+    },
+    "skhmmgmr._search": {
+        "_selector_base": "base",
+        "_evaluation": "_evaluation",
+        "_score_tables": "_score_tables",
+    },
+    "skhmmgmr.feature_selection": {
+        "_spearman": "_spearman",
+        "_forward_paths": "_forward_paths",
+    },
+    "skhmmgmr.selection": {
+        "_sources": "_sources",
+        "_candidates": "_candidates",
+        "_anova": "_anova",
+        "_framework_data": "_framework_data",
+    },
+    "skhmmgmr.cli": {
+        "_cli_files": "_files",
+        "_cli_cluster": "_cluster",
+        "_report": "_report",
+    },
+}
 #: 0.1.0's private modules -> where their code is now.
 MOVED_IN_0_2 = {
-    "skhmmgmr._compat": "skhmmgmr._core._compat",
-    "skhmmgmr._docstrings": "skhmmgmr._core._docstrings",
-    "skhmmgmr._validation": "skhmmgmr._core._validation",
-    "skhmmgmr._sequences": "skhmmgmr._core._sequences",
-    "skhmmgmr._panel": "skhmmgmr._core._panel",
-    "skhmmgmr.datasets._schema": "skhmmgmr._core._schema",
-    "skhmmgmr._kernels": "skhmmgmr._hmm._kernels",
-    "skhmmgmr._gaussian": "skhmmgmr._hmm._gaussian",
-    "skhmmgmr._emissions": "skhmmgmr._hmm._emissions",
-    "skhmmgmr._missing": "skhmmgmr._hmm._missing",
-    "skhmmgmr._stale_inputs": "skhmmgmr._hmm._stale_inputs",
-    "skhmmgmr._fused_estep": "skhmmgmr._hmm._fused_estep",
-    "skhmmgmr._em": "skhmmgmr._hmm._em",
-    "skhmmgmr._em_data": "skhmmgmr._hmm._em_data",
-    "skhmmgmr._em_init": "skhmmgmr._hmm._em_init",
-    "skhmmgmr._gmr": "skhmmgmr._hmm._gmr",
-    "skhmmgmr._fitted": "skhmmgmr._hmm._fitted",
-    "skhmmgmr._hmmlearn": "skhmmgmr._hmm._hmmlearn",
-    "skhmmgmr._estimator_io": "skhmmgmr.estimator._io",
-    "skhmmgmr._prediction_inputs": "skhmmgmr.estimator._prediction_inputs",
-    "skhmmgmr._adaptation": "skhmmgmr.estimator._adaptation",
-    "skhmmgmr._metrics_scorers": "skhmmgmr.metrics._scorers",
-    "skhmmgmr._metrics_table": "skhmmgmr.metrics._table",
-    "skhmmgmr._stream_inputs": "skhmmgmr.streaming._inputs",
-    "skhmmgmr._stream_adaptation": "skhmmgmr.streaming._adaptation",
-    "skhmmgmr._cluster_search": "skhmmgmr.cluster._scatter",
-    "skhmmgmr._cluster_em": "skhmmgmr.cluster._em",
-    "skhmmgmr._selector_base": "skhmmgmr._search.base",
-    "skhmmgmr._evaluation": "skhmmgmr._search._evaluation",
-    "skhmmgmr._score_tables": "skhmmgmr._search._score_tables",
-    "skhmmgmr._spearman": "skhmmgmr.feature_selection._spearman",
-    "skhmmgmr._forward_paths": "skhmmgmr.feature_selection._forward_paths",
-    "skhmmgmr._sources": "skhmmgmr.selection._sources",
-    "skhmmgmr._candidates": "skhmmgmr.selection._candidates",
-    "skhmmgmr._anova": "skhmmgmr.selection._anova",
-    "skhmmgmr._framework_data": "skhmmgmr.selection._framework_data",
-    "skhmmgmr._cli_files": "skhmmgmr.cli._files",
-    "skhmmgmr._cli_cluster": "skhmmgmr.cli._cluster",
-    "skhmmgmr._report": "skhmmgmr.cli._report",
+    f"skhmmgmr.{old}": f"{package}.{module}"
+    for package, moves in _MOVES.items()
+    for old, module in moves.items()
 }
 
 

@@ -13,6 +13,7 @@ recordings: a sampling period scales it, so comparing two series needs none.
 """
 
 import math
+import numbers
 
 import numpy as np
 from scipy.signal import lfilter
@@ -25,6 +26,23 @@ _DECAY_TOLERANCE = 1e-6
 def decay_of(time_constant):
     """Decay ``exp(-1 / tau)`` of a time constant ``tau`` >= 0 in rows (0 for 0)."""
     return math.exp(-1.0 / time_constant) if time_constant > 0 else 0.0
+
+
+def fixed_decay(output_smoothing):
+    """Decay of a fixed ``output_smoothing`` (None or a finite time constant >= 0 in rows);
+    ValueError naming the parameter for anything else ("auto" is chosen in ``fit``)."""
+    if output_smoothing is None:
+        return 0.0
+    if (
+        isinstance(output_smoothing, bool)
+        or not isinstance(output_smoothing, numbers.Real)
+        or not (math.isfinite(output_smoothing) and output_smoothing >= 0)
+    ):
+        raise ValueError(
+            "output_smoothing must be None, 'auto' or a finite time constant >= 0 (in rows); "
+            f"got {output_smoothing!r}"
+        )
+    return decay_of(float(output_smoothing))
 
 
 def time_constant_of(decay):

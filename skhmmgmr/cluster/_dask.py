@@ -16,8 +16,6 @@ Two ways past one machine:
   (:mod:`skhmmgmr.cluster._em`).
 """
 
-import math
-import numbers
 import os
 import warnings
 from contextlib import contextmanager
@@ -33,7 +31,7 @@ from .._hmm._em_init import initial_centers
 from .._hmm._emissions import emission_family
 from .._hmm._fitted import FittedHMMGMR, Standardization
 from .._hmm._gaussian import NotPositiveDefiniteError
-from .._hmm._readout import decay_of
+from .._hmm._readout import fixed_decay
 from ._em import (
     SpreadRows,
     load_partition,
@@ -238,15 +236,12 @@ def _check_supported(estimator):
         )
     if estimator.missing_values != "error":
         raise ValueError("fit_on_cluster refuses missing values (missing_values='error')")
-    smoothing = estimator.output_smoothing
-    if smoothing is not None and not (
-        isinstance(smoothing, numbers.Real) and math.isfinite(smoothing) and smoothing >= 0
-    ):
+    if estimator.output_smoothing == "auto":
         raise ValueError(
-            f"fit_on_cluster takes output_smoothing=None or a finite time constant >= 0 in "
-            f"rows, got {smoothing!r} ('auto' would need every training estimate on the "
-            "client)"
+            "fit_on_cluster takes output_smoothing=None or a finite time constant >= 0 in rows, "
+            "not 'auto' (it would need every training estimate on the client)"
         )
+    fixed_decay(estimator.output_smoothing)  # refuses the values fit refuses
 
 
 def fit_on_cluster(estimator, data, *, features, target=TARGET, client=None):
@@ -329,7 +324,7 @@ def fit_on_cluster(estimator, data, *, features, target=TARGET, client=None):
         Standardization(center, scale, len(features)),
         scalar_output=True,
         feature_names=estimator.feature_names_in_,
-        output_decay=[decay_of(float(estimator.output_smoothing or 0.0))],
+        output_decay=[fixed_decay(estimator.output_smoothing)],
     )
     jacobian = estimator.model_.standardization.log_jacobian(sum(counts))
     estimator.n_iter_, estimator.converged_ = result.n_iter, result.converged

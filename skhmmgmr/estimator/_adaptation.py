@@ -286,7 +286,9 @@ class AdaptMixin:
 
         estimate, std = mixed(alpha @ transition_power(model.transmat, steps), return_std)
         estimate = model.standardization.outputs(estimate)
-        if model.smoothed:
+        if model.smoothed and steps == 0:  # the read-out now: predict's
+            estimate = smooth_outputs(estimate, recordings, model.output_decay)
+        elif model.smoothed:
             estimate = self._read_out_ahead(
                 estimate, alpha, mixed, standardized, recordings, steps, missing
             )

@@ -201,58 +201,9 @@ output_smoothing_
         self.verbose = verbose
 
     # -- the structure: manoeuvre names and their states ----------------------------------------
-    def _names(self, labels=None):
-        """The manoeuvres' names from the parameter (or, for None, the labels)."""
-        manoeuvres = self.manoeuvres
-        if manoeuvres is None:
-            if labels is None:
-                raise ValueError(
-                    "manoeuvres=None takes the manoeuvres from the labels: pass "
-                    "manoeuvre=<label per row> to fit, or give manoeuvres (a number or names)"
-                )
-            return [_plain(name) for name in np.unique(labels)]
-        if isinstance(manoeuvres, Integral):
-            return list(range(int(manoeuvres)))
-        names = [_plain(name) for name in np.asarray(manoeuvres, dtype=object).ravel()]
-        if not names:
-            raise ValueError("manoeuvres is an empty list; give at least one manoeuvre")
-        if len(set(names)) != len(names):
-            twice = sorted({str(n) for n in names if names.count(n) > 1})
-            raise ValueError(f"manoeuvres names {twice} more than once")
-        return names
-
-    def _sizes(self, names):
-        """States per manoeuvre, in the order of ``names``."""
-        n_states = self.n_states
-        if isinstance(n_states, Mapping):
-            given = {_plain(key): value for key, value in n_states.items()}
-            missing = [name for name in names if name not in given]
-            unknown = [key for key in given if key not in names]
-            if missing or unknown:
-                raise ValueError(
-                    f"n_states must give the states of every manoeuvre {names}: "
-                    + (f"it misses {missing}" if missing else f"it names unknown {unknown}")
-                )
-            sizes = [given[name] for name in names]
-        elif isinstance(n_states, Integral):
-            sizes = [n_states] * len(names)
-        else:
-            sizes = list(np.asarray(n_states, dtype=object).ravel())
-            if len(sizes) != len(names):
-                raise ValueError(
-                    f"n_states has {len(sizes)} values for {len(names)} manoeuvres {names}"
-                )
-        for name, size in zip(names, sizes, strict=True):
-            if isinstance(size, bool) or not isinstance(size, Integral) or size < 1:
-                raise ValueError(
-                    f"n_states of manoeuvre {name!r} must be a whole number >= 1, got {size!r}"
-                )
-        return [int(size) for size in sizes]
-
     def _set_structure(self, names, sizes):
-        self.manoeuvres_ = np.asarray(names, dtype=object)
-        self.states_per_manoeuvre_ = np.asarray(sizes, dtype=int)
-        self.state_manoeuvre_ = self._hierarchy().state_manoeuvre.copy()
+        for attribute, value in _structure_attributes(names, sizes).items():
+            setattr(self, attribute, value)
 
     def _hierarchy(self):
         return Hierarchy(self.states_per_manoeuvre_)
@@ -270,7 +221,7 @@ output_smoothing_
         """
         if self.manoeuvres is None:
             return None
-        return sum(self._sizes(self._names()))
+        return sum(_states_per_manoeuvre(self.n_states, _manoeuvre_names(self.manoeuvres)))
 
     # -- fit ------------------------------------------------------------------------------------
     @_fit_context(prefer_skip_nested_validation=True)
@@ -306,8 +257,8 @@ output_smoothing_
                     f"manoeuvre has {labels.shape[0]} labels, X has {_n_rows(X)} rows: give "
                     "one manoeuvre label per row"
                 )
-        names = self._names(labels)
-        sizes = self._sizes(names)
+        names = _manoeuvre_names(self.manoeuvres, labels)
+        sizes = _states_per_manoeuvre(self.n_states, names)
         codes = None if labels is None else _codes(labels, names, X, groups, time)
         inputs = read_joint_inputs(self, X, y, groups, time, fitting=True)
         self._set_structure(names, sizes)
@@ -564,22 +515,18 @@ output_smoothing_
         estimator : HierarchicalHMMGMRRegressor
         """
         given = cls(**params)
-        estimator = super().from_fitted_model(model, **params)
+        estimator = super().from_fitted_model(model, **params)  # validates the parameters
         estimator.n_states = given.n_states
-        return estimator._restore_structure()
-
-    def _restore_structure(self):
-        """Set the manoeuvres' blocks of a model built around a flat fitted state from the
-        parameters (``manoeuvres``, ``n_states``), checked against its states; ``self``."""
-        names = self._names()
-        sizes = self._sizes(names)
-        if sum(sizes) != self.model_.n_states:
+        names = _manoeuvre_names(estimator.manoeuvres)
+        sizes = _states_per_manoeuvre(estimator.n_states, names)
+        if sum(sizes) != model.n_states:
             raise ValueError(
-                f"the model has {self.model_.n_states} states; manoeuvres={names} with "
+                f"the model has {model.n_states} states; manoeuvres={names} with "
                 f"n_states={sizes} make {sum(sizes)}"
             )
-        self._set_structure(names, sizes)
-        return self
+        for attribute, value in _structure_attributes(names, sizes).items():
+            setattr(estimator, attribute, value)
+        return estimator
 
     def to_dict(self, *, output_names=None):
         """The fitted model as a JSON-ready dict (the portable model format).
@@ -592,6 +539,63 @@ output_smoothing_
         data["estimator_params"]["manoeuvres"] = [_plain(name) for name in self.manoeuvres_]
         data["estimator_params"]["n_states"] = [int(size) for size in self.states_per_manoeuvre_]
         return data
+
+
+def _manoeuvre_names(manoeuvres, labels=None):
+    """The manoeuvres' names from the parameter ``manoeuvres`` (or, for None, the labels)."""
+    if manoeuvres is None:
+        if labels is None:
+            raise ValueError(
+                "manoeuvres=None takes the manoeuvres from the labels: pass "
+                "manoeuvre=<label per row> to fit, or give manoeuvres (a number or names)"
+            )
+        return [_plain(name) for name in np.unique(labels)]
+    if isinstance(manoeuvres, Integral):
+        return list(range(int(manoeuvres)))
+    names = [_plain(name) for name in np.asarray(manoeuvres, dtype=object).ravel()]
+    if not names:
+        raise ValueError("manoeuvres is an empty list; give at least one manoeuvre")
+    if len(set(names)) != len(names):
+        twice = sorted({str(n) for n in names if names.count(n) > 1})
+        raise ValueError(f"manoeuvres names {twice} more than once")
+    return names
+
+
+def _states_per_manoeuvre(n_states, names):
+    """States per manoeuvre from the parameter ``n_states``, in the order of ``names``."""
+    if isinstance(n_states, Mapping):
+        given = {_plain(key): value for key, value in n_states.items()}
+        missing = [name for name in names if name not in given]
+        unknown = [key for key in given if key not in names]
+        if missing or unknown:
+            raise ValueError(
+                f"n_states must give the states of every manoeuvre {names}: "
+                + (f"it misses {missing}" if missing else f"it names unknown {unknown}")
+            )
+        sizes = [given[name] for name in names]
+    elif isinstance(n_states, Integral):
+        sizes = [n_states] * len(names)
+    else:
+        sizes = list(np.asarray(n_states, dtype=object).ravel())
+        if len(sizes) != len(names):
+            raise ValueError(
+                f"n_states has {len(sizes)} values for {len(names)} manoeuvres {names}"
+            )
+    for name, size in zip(names, sizes, strict=True):
+        if isinstance(size, bool) or not isinstance(size, Integral) or size < 1:
+            raise ValueError(
+                f"n_states of manoeuvre {name!r} must be a whole number >= 1, got {size!r}"
+            )
+    return [int(size) for size in sizes]
+
+
+def _structure_attributes(names, sizes):
+    """The fitted attributes that say the manoeuvres' blocks of states."""
+    return {
+        "manoeuvres_": np.asarray(names, dtype=object),
+        "states_per_manoeuvre_": np.asarray(sizes, dtype=int),
+        "state_manoeuvre_": Hierarchy(sizes).state_manoeuvre.copy(),
+    }
 
 
 def _plain(value):

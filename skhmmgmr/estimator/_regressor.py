@@ -24,7 +24,7 @@ from .._hmm._emissions import EMISSION_FAMILIES, REFUSED_COVARIANCE_TYPES, emiss
 from .._hmm._fitted import FittedHMMGMR, Standardization
 from .._hmm._gmr import filter_state_probabilities, gmr_estimates, read_missing
 from .._hmm._missing import observed_counts
-from .._hmm._readout import decay_of, smooth_outputs, time_constant_of, weakest_decay
+from .._hmm._readout import fixed_decay, smooth_outputs, time_constant_of, weakest_decay
 from .._hmm._stale_inputs import MISSING_VALUES, learn_stale_noise, stale_noise_for
 from ._adaptation import AdaptMixin
 from ._io import ModelIOMixin
@@ -332,12 +332,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         outputs."""
         n_outputs = inputs.Y.shape[1]
         if self.output_smoothing != "auto":
-            if not np.isfinite(self.output_smoothing):
-                raise ValueError(
-                    "output_smoothing must be None, 'auto' or a finite time constant >= 0 "
-                    f"(in rows); got {self.output_smoothing!r}"
-                )
-            return np.full(n_outputs, decay_of(float(self.output_smoothing)))
+            return np.full(n_outputs, fixed_decay(self.output_smoothing))
         model, recordings = self.model_, inputs.recordings
         standardized = model.standardization.inputs(inputs.X)
         noise = stale_noise_for(model, self.missing_values)
