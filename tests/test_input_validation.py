@@ -166,3 +166,15 @@ def test_missing_recording_id(frame, missing):
     groups[7:9] = missing
     with pytest.raises(ValueError, match=r"missing recording id \(first at row 7\)"):
         HMMGMRRegressor(n_states=2).fit(X, y, groups=groups)
+
+
+def test_finite_interval_refuses_inf_nan_huge_ints_and_bools():
+    from numbers import Real
+
+    from skhmmgmr._core._compat import FiniteInterval
+
+    positive = FiniteInterval(Real, 0, None, closed="neither")
+    assert positive.is_satisfied_by(1e300) and positive.is_satisfied_by(7)
+    for value in (float("inf"), float("nan"), 10**400, True, 0.0, -1.0):
+        assert not positive.is_satisfied_by(value), value
+    assert "finite" in str(positive)

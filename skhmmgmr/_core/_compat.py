@@ -12,6 +12,8 @@ of them predate the oldest supported release (``scikit-learn>=1.8`` in ``pyproje
 sit at the same path from 1.8 to 1.9, so no version switch is needed yet.
 """
 
+import math
+
 import numpy as np
 from sklearn.base import (
     _fit_context,  # fit decorator: validates _parameter_constraints once; since 1.3
@@ -21,6 +23,7 @@ from sklearn.utils._param_validation import (
     InvalidParameterError,  # what the constraints raise (a ValueError and a TypeError); 1.2
     StrOptions,  # constraint: one of a set of strings; since 1.2
     validate_parameter_constraints,  # check a dict of parameters against constraints; 1.2
+    validate_params,  # decorator: a public function's arguments against constraints; 1.2
 )
 from sklearn.utils._param_validation import (
     Interval as _SklearnInterval,  # constraint: a number in a range (bools too); since 1.2
@@ -46,7 +49,28 @@ class Interval(_SklearnInterval):
         return f"{super().__str__()} (not a bool)"
 
 
+class FiniteInterval(Interval):
+    """:class:`Interval` refusing infinite values (and NaN, which no interval holds).
+
+    An unbounded side (``None``) of scikit-learn's ``Interval`` takes ``inf``; a duration, a
+    rate, a speed or a time constant of ``inf`` is a mistake that would otherwise surface as an
+    ``OverflowError`` or a memory error long after the call.
+    """
+
+    def is_satisfied_by(self, val):
+        if not super().is_satisfied_by(val):
+            return False
+        try:
+            return math.isfinite(val)
+        except OverflowError:  # an int beyond the largest float
+            return False
+
+    def __str__(self):
+        return f"{super().__str__()} and finite"
+
+
 __all__ = [
+    "FiniteInterval",
     "HasMethods",
     "Interval",
     "InvalidParameterError",
@@ -55,4 +79,5 @@ __all__ = [
     "_fit_context",
     "_routing_enabled",
     "validate_parameter_constraints",
+    "validate_params",
 ]
