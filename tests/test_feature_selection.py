@@ -23,17 +23,17 @@ from sklearn.pipeline import make_pipeline
 from threadpoolctl import threadpool_limits
 
 from skhmmgmr import HMMGMRRegressor, StateSelector
-from skhmmgmr._search import _evaluation
-from skhmmgmr._search._evaluation import shared_evaluations
 from skhmmgmr.feature_selection import (
     ExhaustiveFeatureSelector,
     ForwardFeatureSelector,
     SpearmanSelector,
     spearman_relevance,
 )
-from skhmmgmr.feature_selection._forward_paths import ForwardPath
 from skhmmgmr.metrics import PerformanceScore, performance_score
 from skhmmgmr.selection import compare_subsets, select_parameters
+from skhmmgmr.selection._search import _evaluation
+from skhmmgmr.selection._search._evaluation import shared_evaluations
+from skhmmgmr.selection._selectors._forward_paths import ForwardPath
 
 PERIOD = 0.05
 FEATURES = ["f0", "f1", "f2", "f3"]
@@ -294,7 +294,7 @@ def test_interrupted_parallel_search_leaves_no_folder_or_worker(data, tmp_path, 
 KILLED_RUN = """
 import os, signal
 import joblib, numpy as np
-from skhmmgmr._search import _evaluation
+from skhmmgmr.selection._search import _evaluation
 from skhmmgmr.feature_selection import ExhaustiveFeatureSelector
 
 def die(results, **kwargs):
@@ -472,7 +472,7 @@ def test_shared_evaluations_reuse_subsets_across_steps_with_the_same_results(dat
 
 
 def test_models_are_fitted_longest_first_and_reported_in_their_order(data, monkeypatch):
-    from skhmmgmr._search import _evaluation
+    from skhmmgmr.selection._search import _evaluation
 
     X, y, groups, cv = data
     X = X.to_numpy()

@@ -24,20 +24,20 @@ LAYERS = (
     ("streaming", "cluster"),
     # the scikit-learn estimator
     ("estimator",),
-    # what uses the estimator: the torque pipeline, the search over recordings
-    ("torque_pipeline", "_search"),
-    # the selectors; the model file of any fitted model (the regressor, the torque pipeline);
-    # the C code of a fitted regressor or torque pipeline
-    ("feature_selection", "state_selection", "portable", "export"),
-    # the framework over all selectors, the users' checks
-    ("selection", "utils"),
+    # what uses the estimator: the torque pipeline; the selection family (the search over
+    # recordings, the selectors, the framework)
+    ("torque_pipeline", "selection"),
+    # the model file of any fitted model (the regressor, the torque pipeline); the C code of a
+    # fitted regressor or torque pipeline; the public faces of the selectors and of the users'
+    # checks, which live in the selection family
+    ("portable", "export", "feature_selection", "state_selection", "utils"),
     # the command line and its report
     ("cli",),
     # the package's face
     ("__init__", "__main__"),
 )
 RANK = {entry: rank for rank, layer in enumerate(LAYERS) for entry in layer}
-MAX_TOP_LEVEL_ENTRIES = 21
+MAX_TOP_LEVEL_ENTRIES = 20
 
 
 def _entry(parts):

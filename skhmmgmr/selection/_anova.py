@@ -13,8 +13,8 @@ import numbers
 
 import pandas as pd
 
-from .._search._score_tables import labels_of, one_way_anova
 from ..metrics._table import parse_trade_offs
+from ._search._score_tables import labels_of, one_way_anova
 
 # "100/0 to 40/60": the trade-offs giving accuracy at least this share of the weight
 LOWEST_ACCURACY_SHARE = 0.4

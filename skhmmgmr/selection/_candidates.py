@@ -12,10 +12,10 @@ import numpy as np
 import pandas as pd
 
 from .._core._docstrings import fill_shared_parameters
-from .._search._evaluation import check_recording_splits, evaluate_models
-from .._search._score_tables import best_per_recording, labels_of, rescore_table
-from .._search.base import default_estimator, input_feature_names
 from ..metrics._scores import trade_offs as all_trade_offs
+from ._search._evaluation import check_recording_splits, evaluate_models
+from ._search._score_tables import best_per_recording, labels_of, rescore_table
+from ._search.base import default_estimator, input_feature_names
 
 # Share of the recordings a feature must reach; Liberal: counted at least once.
 STRATEGIES = {"Strict": 0.66, "Mild": 0.33, "Liberal": None}

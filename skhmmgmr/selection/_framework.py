@@ -10,7 +10,7 @@
 4. candidate subsets Strict / Mild / Liberal from the exhaustive (1) and forward (2) counts,
    and their unions (3) (:func:`candidate_subsets`), compared with K=2 on the validation
    recordings (:func:`compare_subsets`); the lowest mean performance score wins;
-5. state selection for that subset (:class:`~skhmmgmr.state_selection.StateSelector`);
+5. state selection for that subset (:class:`~skhmmgmr.StateSelector`);
 6. the final model and the all-feature baseline (same K) on the test recordings.
 
 One-way ANOVAs (:func:`one_way_anova`) check whether the metric differences across trade-offs
@@ -30,13 +30,8 @@ from threadpoolctl import threadpool_limits
 
 from .._core._docstrings import fill_shared_parameters
 from .._core._schema import TARGET
-from .._search._evaluation import shared_evaluations
-from .._search._score_tables import labels_of
-from .._search.base import default_estimator
-from ..feature_selection._spearman import SpearmanSelector
 from ..metrics._scores import evaluate_recordings, normalize_performance
 from ..metrics._scores import trade_offs as all_trade_offs
-from ..state_selection import StateSelector
 from ._anova import N_STRATEGIES, check_anova_scope, framework_anova
 from ._candidates import (
     COMBINED,
@@ -45,6 +40,11 @@ from ._candidates import (
     compare_subsets,
 )
 from ._framework_data import sampling_period_of, split_recordings_table
+from ._search._evaluation import shared_evaluations
+from ._search._score_tables import labels_of
+from ._search.base import default_estimator
+from ._selectors._spearman import SpearmanSelector
+from ._selectors._states import StateSelector
 from ._sources import (
     check_sources,
     fit_source,

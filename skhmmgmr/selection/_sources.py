@@ -13,8 +13,9 @@ import pandas as pd
 from sklearn.base import clone
 
 from .._core._compat import _routing_enabled
-from ..feature_selection._wrappers import ExhaustiveFeatureSelector, ForwardFeatureSelector
 from ._candidates import feature_relevance
+from ._selectors._exhaustive import ExhaustiveFeatureSelector
+from ._selectors._forward import ForwardFeatureSelector
 
 FEATURE_SCOPES = ("all", "top")
 

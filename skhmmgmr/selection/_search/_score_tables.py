@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from ..metrics._scores import normalize_performance
-from ..metrics._table import parse_trade_offs
+from ...metrics._scores import normalize_performance
+from ...metrics._table import parse_trade_offs
 
 
 def rescore_table(results, key, trade_offs):

@@ -13,10 +13,10 @@ from sklearn.base import BaseEstimator
 from sklearn.feature_selection import SelectorMixin
 from sklearn.utils.validation import check_is_fitted
 
-from .._core._compat import Interval, StrOptions, _fit_context
-from .._core._docstrings import fill_shared_parameters
-from .._core._panel import recordings_of
-from .._core._validation import check_dense, check_finite, check_target_finite
+from ..._core._compat import Interval, StrOptions, _fit_context
+from ..._core._docstrings import fill_shared_parameters
+from ..._core._panel import recordings_of
+from ..._core._validation import check_dense, check_finite, check_target_finite
 from .._search.base import read_search_inputs
 
 
