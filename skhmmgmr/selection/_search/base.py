@@ -17,11 +17,12 @@ from sklearn.base import BaseEstimator, clone
 from sklearn.feature_selection import SelectorMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ..._core._compat import FiniteInterval, HasMethods
+from ..._core._compat import HasMethods
 from ..._core._docstrings import fill_shared_parameters
 from ..._core._panel import align_target, read_layout, recordings_of
 from ..._core._validation import check_finite, check_target_finite, column_names_of
 from ...estimator import HMMGMRRegressor
+from ...metrics._table import SAMPLING_PERIOD, WEIGHT
 from ._evaluation import check_recording_splits, evaluate_models, shared_evaluation_store
 
 
@@ -49,6 +50,27 @@ def _evaluation_context(estimator, y, groups, splits, sampling_period):
     return joblib.hash((clone(estimator), y, codes, list(ids), splits, sampling_period))
 
 
+#: The constraints of the parameters every search takes: the selectors' (through
+#: :class:`RecordingSearchMixin`) and the search functions' (:func:`search_constraints`); the
+#: trade-off's and the sampling period's are the metrics'.
+SEARCH_CONSTRAINTS = {
+    "estimator": [HasMethods(["fit", "predict"]), None],
+    "cv": ["cv_object"],
+    "accuracy_weight": WEIGHT,
+    "smoothness_weight": WEIGHT,
+    "sampling_period": SAMPLING_PERIOD,
+    "n_jobs": [numbers.Integral, None],
+    "memory": [None, str, HasMethods(["cache"])],
+    "verbose": ["verbose"],
+}
+
+
+def search_constraints(*names):
+    """The constraints of the search parameters ``names``, for ``validate_params`` of a
+    function that takes them as a selector does."""
+    return {name: SEARCH_CONSTRAINTS[name] for name in names}
+
+
 @fill_shared_parameters
 class RecordingSearchMixin:
     """The parameters, checks and evaluations shared by the selectors that fit one model per
@@ -70,16 +92,7 @@ class RecordingSearchMixin:
     # Recording ids make the data sequences: requested by default, like HMMGMRRegressor.
     __metadata_request__fit = {"groups": True}
 
-    _parameter_constraints: dict = {
-        "estimator": [HasMethods(["fit", "predict"]), None],
-        "cv": ["cv_object"],
-        "accuracy_weight": [FiniteInterval(numbers.Real, 0, None, closed="left")],
-        "smoothness_weight": [FiniteInterval(numbers.Real, 0, None, closed="left")],
-        "sampling_period": [FiniteInterval(numbers.Real, 0, None, closed="neither"), None],
-        "n_jobs": [numbers.Integral, None],
-        "memory": [None, str, HasMethods(["cache"])],
-        "verbose": ["verbose"],
-    }
+    _parameter_constraints: dict = SEARCH_CONSTRAINTS
 
     def __init__(
         self,

@@ -12,6 +12,7 @@ from numbers import Integral
 import numpy as np
 from sklearn.model_selection import PredefinedSplit
 
+from ..._core._compat import HasMethods, validate_params
 from ...estimator import HierarchicalHMMGMRRegressor, HMMGMRRegressor
 from .._search._evaluation import check_recording_splits
 from .._search.base import RecordingSearchMixin
@@ -133,6 +134,8 @@ def _why_the_search_cannot_fit(search):
     return None
 
 
+# What check_estimator checks: an estimator (it clones it, through get_params).
+@validate_params({"estimator": [HasMethods(["get_params"])]}, prefer_skip_nested_validation=True)
 def expected_failed_checks(estimator):
     """The scikit-learn estimator checks that ``estimator`` fails by design, and why.
 

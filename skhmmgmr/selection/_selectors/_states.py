@@ -27,11 +27,18 @@ from sklearn.base import BaseEstimator, RegressorMixin, clone
 from sklearn.exceptions import NotFittedError
 from sklearn.utils.validation import check_is_fitted
 
-from ..._core._compat import Interval, _fit_context
+from ..._core._compat import Interval, _fit_context, validate_params
 from ..._core._docstrings import fill_shared_parameters
 from ...metrics._scores import trade_offs as all_trade_offs
 from .._search._score_tables import labels_of, relative_gain, rescore_table
-from .._search.base import RecordingSearchMixin
+from .._search.base import RecordingSearchMixin, search_constraints
+
+# The 1% rule: K grows while one more state improves the score by more than ``tol``.
+TOL = [Interval(Real, 0, None, closed="left")]
+K_RANGE = {
+    "k_min": [Interval(Integral, 1, None, closed="left")],
+    "k_max": [Interval(Integral, 1, None, closed="left")],
+}
 
 
 def _grow_while_gain(n_states, scores, tol):
@@ -42,6 +49,10 @@ def _grow_while_gain(n_states, scores, tol):
     return int(n_states[i])
 
 
+@validate_params(
+    {"scores": [pd.DataFrame], "tol": TOL, "score": [str]},
+    prefer_skip_nested_validation=True,
+)
 def state_choices(scores, *, tol=0.01, score="performance_score"):
     """Apply the thesis' 1% rule to a table of scores of K = 1..K_max.
 
@@ -152,9 +163,8 @@ class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
 
     _parameter_constraints = {
         **RecordingSearchMixin._parameter_constraints,
-        "k_min": [Interval(Integral, 1, None, closed="left")],
-        "k_max": [Interval(Integral, 1, None, closed="left")],
-        "tol": [Interval(Real, 0, None, closed="left")],
+        **K_RANGE,
+        "tol": TOL,
         "param_name": [str],
         "refit": ["boolean"],
     }
@@ -260,6 +270,18 @@ class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
         return self.best_estimator_.predict(X, groups=groups)
 
 
+@validate_params(
+    {
+        "X": ["array-like", "sparse matrix"],  # sparse: refused by fit, saying what to do
+        "y": ["array-like"],
+        "groups": ["array-like", None],
+        **K_RANGE,
+        "tol": TOL,
+        "trade_offs": [str, list, tuple, None],
+        **search_constraints("estimator", "cv", "sampling_period", "n_jobs", "memory", "verbose"),
+    },
+    prefer_skip_nested_validation=False,  # the estimator's own parameters are checked in fit
+)
 @fill_shared_parameters
 def select_n_states(
     X,
