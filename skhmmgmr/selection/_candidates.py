@@ -14,6 +14,7 @@ import pandas as pd
 from .._core._compat import HasMethods, Interval, StrOptions, validate_params
 from .._core._docstrings import fill_shared_parameters
 from ..metrics._scores import trade_offs as all_trade_offs
+from ..metrics._table import TRADE_OFFS
 from ._search._evaluation import check_recording_splits, evaluate_models
 from ._search._score_tables import best_per_recording, labels_of, rescore_table
 from ._search.base import default_estimator, input_feature_names, search_constraints
@@ -24,9 +25,8 @@ SHARE = [Interval(Real, 0, 1, closed="right")]
 # Name of the candidates built from all sources together, and the rules that form them.
 COMBINED = "combined"
 COMBINED_RULE = [StrOptions({"union", "sum"})]
-# One trade-off ("50/50" or a pair of weights); several ("100/0", "0/100"...) as a list.
+# One trade-off: "50/50" or a pair of weights.
 TRADE_OFF = [str, tuple]
-TRADE_OFFS = [str, list, tuple]
 
 
 @validate_params(

@@ -34,15 +34,9 @@ from .._core._docstrings import fill_shared_parameters
 from .._core._schema import TARGET
 from ..metrics._scores import evaluate_recordings, normalize_performance
 from ..metrics._scores import trade_offs as all_trade_offs
+from ..metrics._table import TRADE_OFFS
 from ._anova import N_STRATEGIES, check_anova_scope, framework_anova
-from ._candidates import (
-    COMBINED,
-    COMBINED_RULE,
-    TRADE_OFF,
-    TRADE_OFFS,
-    candidate_subsets,
-    compare_subsets,
-)
+from ._candidates import COMBINED, COMBINED_RULE, TRADE_OFF, candidate_subsets, compare_subsets
 from ._framework_data import sampling_period_of, split_recordings_table
 from ._search._evaluation import shared_evaluations
 from ._search._score_tables import labels_of

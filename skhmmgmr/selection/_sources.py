@@ -22,7 +22,10 @@ from ._selectors._exhaustive import ExhaustiveFeatureSelector
 from ._selectors._forward import ForwardFeatureSelector
 
 FEATURE_SCOPES = ("all", "top")
-_CONSTRAINTS = {"selector": [HasMethods(["fit"])], "features": [StrOptions(set(FEATURE_SCOPES))]}
+SOURCE_CONSTRAINTS = {
+    "selector": [HasMethods(["fit"])],
+    "features": [StrOptions(set(FEATURE_SCOPES))],
+}
 
 
 @dataclass(frozen=True)
@@ -53,7 +56,9 @@ class RelevanceSource:
 
     def __post_init__(self):
         parameters = {"selector": self.selector, "features": self.features}
-        validate_parameter_constraints(_CONSTRAINTS, parameters, caller_name="RelevanceSource")
+        validate_parameter_constraints(
+            SOURCE_CONSTRAINTS, parameters, caller_name="RelevanceSource"
+        )
 
 
 def thesis_sources(estimator, *, max_subset_size=None, tol=0.01):

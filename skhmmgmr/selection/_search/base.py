@@ -77,8 +77,9 @@ class RecordingSearchMixin:
     candidate (a feature subset, a number of states) and judge it on validation recordings.
 
     The shared parameters are defined here once: their constraints, their storage in
-    ``__init__`` and their description (the lines ``{estimator}`` and ``{search parameters}``
-    of a selector's docstring). A selector adds its own parameters to
+    ``__init__`` and their description (the entries of ``_core/_docstrings.py`` that the lines
+    ``{estimator}`` and ``{search parameters}`` of a docstring stand for, below and in every
+    selector's). A selector adds its own parameters to
     ``_parameter_constraints`` and to ``__init__``, whose signature restates the shared
     ones (scikit-learn reads an estimator's parameters from that signature) and hands them
     to this ``__init__``.
