@@ -7,14 +7,14 @@ model as they read any other.
 """
 
 import warnings
-from collections.abc import Mapping
-from numbers import Integral
+from collections.abc import Mapping, Set
+from numbers import Integral, Number
 
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils.validation import check_is_fitted
 
-from .._core._compat import Interval, StrOptions, _fit_context
+from .._core._compat import Interval, InvalidParameterError, StrOptions, _fit_context
 from .._core._panel import read_layout
 from .._hmm._emissions import emission_family
 from .._hmm._hierarchy import Hierarchy
@@ -88,7 +88,7 @@ class HierarchicalHMMGMRRegressor(HMMGMRRegressor):
         Regularisation of the state covariances (see :class:`HMMGMRRegressor`).
     missing_values : {"error", "marginalize", "carry_forward"}, default="error"
         What a NaN means (see :class:`HMMGMRRegressor`).
-    output_smoothing : None, float >= 0 or "auto", default=None
+    output_smoothing : None, float in [0, 1e6] or "auto", default=None
         Causal first-order read-out of the estimate (see :class:`HMMGMRRegressor`).
     random_state : int, RandomState instance or None, default=None
         Seed of the initialisations.
@@ -233,17 +233,10 @@ output_smoothing_
         self : HierarchicalHMMGMRRegressor
         """
         emission_family(self.covariance_type)
-        labels = None
-        if manoeuvre is not None:
-            labels = np.asarray(manoeuvre, dtype=object).ravel()
-            if labels.shape[0] != _n_rows(X):
-                raise ValueError(
-                    f"manoeuvre has {labels.shape[0]} labels, X has {_n_rows(X)} rows: give "
-                    "one manoeuvre label per row"
-                )
+        labels = None if manoeuvre is None else _Labels.read(manoeuvre, X, groups, time)
         names = _manoeuvre_names(self.manoeuvres, labels)
         sizes = _states_per_manoeuvre(self.n_states, names)
-        codes = None if labels is None else _codes(labels, names, X, groups, time)
+        codes = None if labels is None else labels.codes(names)
         inputs = read_joint_inputs(self, X, y, groups, time, fitting=True)
         standardized, scaling, stale_noise = self._standardized(inputs, sum(sizes))
         settings = HierarchyEM(
@@ -378,19 +371,32 @@ output_smoothing_
 
 
 def _manoeuvre_names(manoeuvres, labels=None):
-    """The manoeuvres' names from the parameter ``manoeuvres`` (or, for None, the labels)."""
+    """The manoeuvres' names from the parameter ``manoeuvres`` (or, for None, the
+    :class:`_Labels` of fit)."""
     if manoeuvres is None:
         if labels is None:
             raise ValueError(
                 "manoeuvres=None takes the manoeuvres from the labels: pass "
                 "manoeuvre=<label per row> to fit, or give manoeuvres (a number or names)"
             )
-        return [_plain(name) for name in np.unique(labels)]
+        return labels.names()
     if isinstance(manoeuvres, Integral):
         return list(range(int(manoeuvres)))
+    if isinstance(manoeuvres, Mapping | Set):
+        raise InvalidParameterError(
+            "The 'manoeuvres' parameter of HierarchicalHMMGMRRegressor must be a number of "
+            f"manoeuvres, a list of their names in the order of their blocks, or None; got the "
+            f"{type(manoeuvres).__name__} {manoeuvres!r} (the states per manoeuvre go in "
+            "n_states, which takes a dict)"
+        )
     names = [_plain(name) for name in np.asarray(manoeuvres, dtype=object).ravel()]
     if not names:
         raise ValueError("manoeuvres is an empty list; give at least one manoeuvre")
+    for name in names:
+        if not _is_label(name):
+            raise ValueError(
+                f"manoeuvres holds {name!r}: every manoeuvre's name must be a text or a number"
+            )
     if len(set(names)) != len(names):
         twice = sorted({str(n) for n in names if names.count(n) > 1})
         raise ValueError(f"manoeuvres names {twice} more than once")
@@ -439,15 +445,69 @@ def _plain(value):
     return value.item() if isinstance(value, np.generic) else value
 
 
-def _codes(labels, names, X, groups, time):
-    """The manoeuvre index of every row, in the filter order of fit; unknown labels
-    refused."""
-    labels = read_layout(X, groups, time, canonical=True).to_filter_order(labels)
-    index = {name: i for i, name in enumerate(names)}
-    unknown = sorted({str(label) for label in labels if _plain(label) not in index})
-    if unknown:
-        raise ValueError(f"manoeuvre holds the label(s) {unknown}, not among manoeuvres={names}")
-    return np.fromiter((index[_plain(v)] for v in labels), dtype=np.intp, count=len(labels))
+def _is_label(value):
+    """Whether ``value`` may name a manoeuvre: a text or a number, not missing (None, NaN)."""
+    return isinstance(value, str | Number) and value == value
+
+
+class _Labels:
+    """The manoeuvre label of every row, in the filter order of fit, and where every row came
+    from (its row in ``X`` and its recording), to name them in errors."""
+
+    def __init__(self, labels, rows, recordings):
+        self.labels, self.rows, self.recordings = labels, rows, recordings
+
+    @classmethod
+    def read(cls, manoeuvre, X, groups, time):
+        labels = np.asarray(manoeuvre, dtype=object).ravel()
+        n_rows = _n_rows(X)
+        if labels.shape[0] != n_rows:
+            raise ValueError(
+                f"manoeuvre has {labels.shape[0]} labels, X has {n_rows} rows: give one "
+                "manoeuvre label per row"
+            )
+        layout = read_layout(X, groups, time, canonical=True)
+        rows = np.arange(n_rows) if layout.order is None else np.asarray(layout.order)
+        read = cls(layout.to_filter_order(labels), rows, layout.groups)
+        plain = [_plain(label) for label in read.labels]
+        bad = next((i for i, label in enumerate(plain) if not _is_label(label)), None)
+        if bad is not None:
+            raise ValueError(
+                f"manoeuvre holds {plain[bad]!r} at {read.where(bad)}: every row needs the "
+                "name (a text or a number) of its manoeuvre"
+            )
+        read.labels = plain
+        return read
+
+    def where(self, i):
+        """Row ``i`` (filter order) named by its row in ``X`` and its recording."""
+        row = f"row {self.rows[i]} of X"
+        if self.recordings is None:
+            return row
+        return f"{row} (recording {_plain(self.recordings[i])!r})"
+
+    def names(self):
+        """The distinct labels, sorted (``manoeuvres=None``)."""
+        try:
+            return [_plain(name) for name in np.unique(np.asarray(self.labels, dtype=object))]
+        except TypeError:  # texts and numbers do not sort together
+            kinds = sorted({type(label).__name__ for label in self.labels})
+            raise ValueError(
+                f"manoeuvre mixes labels of the types {kinds}, which have no order: give "
+                "manoeuvres=[...] to name the manoeuvres in the order of their blocks"
+            ) from None
+
+    def codes(self, names):
+        """The manoeuvre index of every row; a label not among ``names`` refused."""
+        index = {name: i for i, name in enumerate(names)}
+        unknown = sorted({str(label) for label in self.labels if label not in index})
+        if unknown:
+            first = next(i for i, label in enumerate(self.labels) if label not in index)
+            raise ValueError(
+                f"manoeuvre holds the label(s) {unknown}, not among manoeuvres={names}; the "
+                f"first is at {self.where(first)}"
+            )
+        return np.fromiter((index[v] for v in self.labels), dtype=np.intp, count=len(self.labels))
 
 
 def _n_rows(X):
