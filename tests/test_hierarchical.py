@@ -8,7 +8,7 @@ from scipy.stats import multivariate_normal
 from sklearn import config_context
 from sklearn.model_selection import GroupKFold, cross_validate
 
-from skhmmgmr import HierarchicalHMMGMRRegressor
+from skhmmgmr import HierarchicalHMMGMRRegressor, portable
 from skhmmgmr.export import write_c
 
 
@@ -214,8 +214,9 @@ def test_model_file_stream_and_c_export_reproduce_predict(fitted, tmp_path):
     model, X, _, _, groups = fitted
     rows = X[groups == 1]
     path = tmp_path / "hierarchy.json"
-    model.export_json(path)
-    restored = HierarchicalHMMGMRRegressor.from_json(path)
+    portable.save(model, path)
+    restored = portable.load(path)
+    assert type(restored) is HierarchicalHMMGMRRegressor
     np.testing.assert_allclose(restored.predict(rows), model.predict(rows), rtol=0, atol=1e-12)
     np.testing.assert_allclose(
         restored.predict_manoeuvre_proba(rows), model.predict_manoeuvre_proba(rows), atol=1e-12

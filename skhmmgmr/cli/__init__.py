@@ -1,6 +1,5 @@
 """Command line: ``skhmmgmr demo | select | report | fit | predict | export-c``."""
 
-from .._core._public import publish
 from ._commands import (
     DEMO_SCALES,
     build_parser,
@@ -24,5 +23,3 @@ __all__ = [
     "command_select",
     "main",
 ]
-
-publish(globals())

@@ -1,7 +1,6 @@
 """Driving data: an embedded lane-keeping simulator and loaders for public and own recordings."""
 
 from .._core._panel import to_panel
-from .._core._public import publish
 from .._core._schema import (
     DRIVER,
     FEATURE_NAMES,
@@ -63,5 +62,3 @@ __all__ = [
     "TARGET",
     "TIME",
 ]
-
-publish(globals())
