@@ -42,6 +42,10 @@ ALLOWED_PRIVATE_ACCESS: set[tuple[str, str]] = {
     # manoeuvres), the two hooks of the estimator's model I/O mixin (``estimator/_io.py``).
     ("_portable.py", "_portable_type"),
     ("_portable.py", "_portable_params"),
+    # The command line checks an option that sets a model's parameter (--output-smoothing,
+    # --sampling-period...) by that parameter's own constraint when it parses it, so that the
+    # command line and the API refuse the same values alike, with no rule restated.
+    ("_options.py", "_parameter_constraints"),
 }
 
 

@@ -70,12 +70,12 @@ _KINDS = {
 
 
 class _Invalid(ValueError):
-    """A broken rule: the path of the value and what is wrong with it (``final``: a message
-    that no ``title`` replaces)."""
+    """A broken rule: the path of the value and what is wrong with it (``whole``: the value
+    itself, not a part of it; ``final``: a message that no ``title`` replaces)."""
 
-    def __init__(self, path, problem, *, final=False):
+    def __init__(self, path, problem, *, final=False, whole=False):
         super().__init__(path, problem)
-        self.path, self.problem, self.final = path, problem, final
+        self.path, self.problem, self.final, self.whole = path, problem, final, whole
 
     def __str__(self):
         if self.problem.startswith("lacks the key"):
@@ -335,7 +335,11 @@ def _check(schema, value, path, root):
     if schema is False:
         raise _Invalid(path, f"is {value!r:.100}, where the format allows no value")
     try:
-        _check_value(schema, value, path)
+        try:
+            _check_value(schema, value, path)
+        except _Invalid as exc:
+            exc.whole = True  # the value itself is wrong, not a part of it
+            raise
         evaluated = set()
         if isinstance(value, dict):
             evaluated |= _check_object(schema, value, path, root)
@@ -344,8 +348,7 @@ def _check(schema, value, path, root):
         evaluated |= _check_in_place(schema, value, path, root)
     except _Invalid as exc:
         # a value that is itself wrong (not a part of it) is named by what it must be
-        wrong = exc.path == path and not exc.final and not isinstance(value, dict | list)
-        if "title" in schema and wrong:
+        if "title" in schema and exc.whole and exc.path == path and not exc.final:
             raise _Invalid(path, f"must be {schema['title']}, got {value!r:.100}") from None
         raise
     if "unevaluatedProperties" in schema and isinstance(value, dict):
@@ -375,7 +378,7 @@ def _check_in_place(schema, value, path, root):
         if keyword in schema:
             evaluated |= _check_alternatives(keyword, schema[keyword], value, path, root)
     if "not" in schema and is_valid_under(schema["not"], value, root):
-        raise _Invalid(path, f"is {value!r:.100}, which the format does not allow")
+        raise _Invalid(path, f"is {value!r:.100}, which the format does not allow", whole=True)
     return evaluated
 
 
