@@ -16,8 +16,8 @@ from skhmmgmr.datasets import (
     make_driving_protocol,
     make_lane_keeping,
 )
-from skhmmgmr.datasets._sensors import draw_errors, measure
-from skhmmgmr.datasets._simulator import Section, _features
+from skhmmgmr.datasets._simulator._lane_keeping import Section, _features
+from skhmmgmr.datasets._simulator._sensors import draw_errors, measure
 from skhmmgmr.metrics import LANE_KEEPING_METRICS, lane_keeping_metrics
 
 FEATURES = list(FEATURE_NAMES)

@@ -17,9 +17,9 @@ from skhmmgmr.datasets import (
     make_lane_keeping,
     torque_ahead,
 )
-from skhmmgmr.datasets._horizon import measured_log, rollout
-from skhmmgmr.datasets._sensors import SensorStream
-from skhmmgmr.datasets._simulator import Section
+from skhmmgmr.datasets._simulator._horizon import measured_log, rollout
+from skhmmgmr.datasets._simulator._lane_keeping import Section
+from skhmmgmr.datasets._simulator._sensors import SensorStream
 
 RATE = 50.0
 SEEDS = dict(random_state=5, road_random_state=7)

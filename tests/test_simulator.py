@@ -19,7 +19,7 @@ from skhmmgmr.datasets import (
     make_driving_protocol,
     make_lane_keeping,
 )
-from skhmmgmr.datasets._road import (
+from skhmmgmr.datasets._simulator._road import (
     ANGLES,
     CLOTHOID_LENGTH,
     GRID_STEP,

@@ -15,7 +15,7 @@ from skhmmgmr.datasets import (
     make_driving_protocol,
     make_lane_keeping,
 )
-from skhmmgmr.datasets._simulator import INTERNAL_RATE, STIFF_STEP
+from skhmmgmr.datasets._simulator._lane_keeping import INTERNAL_RATE, STIFF_STEP
 
 # The car a model drives alone (no arm inertia) that explicit Euler makes chatter: the widest
 # friction against the lightest wheel of VEHICLE_RANGES.

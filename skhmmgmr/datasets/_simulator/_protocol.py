@@ -7,10 +7,10 @@ import numpy as np
 from joblib import Parallel, delayed
 from sklearn.utils import check_random_state
 
+from .._frame import concat_frames
 from ._driver import DRIVER_STYLES
-from ._frame import concat_frames
+from ._lane_keeping import make_lane_keeping
 from ._sensors import check_sensor_noise
-from ._simulator import make_lane_keeping
 from ._vehicle import check_vehicle
 
 TRAIN_SETTINGS = (1, 2, 3, 4, 5, 6)

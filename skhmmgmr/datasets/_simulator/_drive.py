@@ -7,16 +7,16 @@ import warnings
 import numpy as np
 import pandas as pd
 
-from .._core._schema import FEATURE_NAMES
+from ..._core._schema import FEATURE_NAMES
 from ._driver import DRIVER_STYLES
-from ._sensors import SensorStream, draw_errors
-from ._simulator import (
+from ._lane_keeping import (
     LOST_CONTROL,
     Section,
     _features,
     checked_section_arguments,
     make_lane_keeping,
 )
+from ._sensors import SensorStream, draw_errors
 
 # The human whose parameters a model run draws (and does not use): every style draws as many
 # numbers, so the road, the manoeuvres and the sensor errors are those of any human's run.

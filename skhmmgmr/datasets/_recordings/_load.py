@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .._core._schema import DRIVER, RECORDING, SETTING, SPLIT, TARGET, TIME
-from ._frame import META_DEFAULTS, check_rate, tidy_frame, time_order
+from ..._core._schema import DRIVER, RECORDING, SETTING, SPLIT, TARGET, TIME
+from .._frame import META_DEFAULTS, check_rate, tidy_frame, time_order
 from ._resample import check_max_gap, resample_recordings
 
 _CSV_SUFFIXES = (".csv", ".csv.gz", ".csv.bz2", ".csv.zip", ".csv.xz")

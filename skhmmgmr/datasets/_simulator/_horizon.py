@@ -24,11 +24,11 @@ import numbers
 import numpy as np
 import pandas as pd
 
-from .._core._schema import FEATURE_NAMES, RECORDING, TARGET, TIME
+from ..._core._schema import FEATURE_NAMES, RECORDING, TARGET, TIME
 from ._drive import _input_positions, sense
 from ._driver import check_driver
+from ._lane_keeping import Section, _features, _simulate, checked_section_arguments
 from ._sensors import SensorStream, draw_errors, measure
-from ._simulator import Section, _features, _simulate, checked_section_arguments
 
 HORIZON = "horizon"
 ESTIMATE = "estimate"

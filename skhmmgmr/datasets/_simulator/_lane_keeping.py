@@ -8,7 +8,7 @@ from dataclasses import asdict
 import numpy as np
 from sklearn.utils import check_random_state
 
-from .._core._schema import (
+from ..._core._schema import (
     CROSSING_TIME,
     DRIVER,
     FEATURE_NAMES,
@@ -19,8 +19,8 @@ from .._core._schema import (
     TARGET,
     TIME,
 )
+from .._frame import tidy_frame
 from ._driver import check_driver, coloured_noise, sample_driver
-from ._frame import tidy_frame
 from ._road import LANE_WIDTH, SETTINGS, make_road, manoeuvre_of, manoeuvre_offsets
 from ._sensors import check_sensor_noise, measure
 from ._vehicle import check_vehicle

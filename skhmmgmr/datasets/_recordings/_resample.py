@@ -28,8 +28,8 @@ import warnings
 import numpy as np
 import pandas as pd
 
-from .._core._schema import DRIVER, RECORDING, SETTING, SPLIT, TIME
-from ._frame import check_rate, check_times
+from ..._core._schema import DRIVER, RECORDING, SETTING, SPLIT, TIME
+from .._frame import check_rate, check_times
 
 SEPARATOR = "/"
 # Bounds of the grid: a piece gets at most this many grid rows per sample (a 10 Hz log on a
