@@ -15,7 +15,8 @@ from skhmmgmr.datasets import (
     make_driving_protocol,
     make_lane_keeping,
 )
-from skhmmgmr.datasets._simulator._lane_keeping import INTERNAL_RATE, STIFF_STEP
+from skhmmgmr.datasets._simulator._section import INTERNAL_RATE
+from skhmmgmr.datasets._simulator._steering import STIFF_STEP
 
 # The car a model drives alone (no arm inertia) that explicit Euler makes chatter: the widest
 # friction against the lightest wheel of VEHICLE_RANGES.
@@ -151,8 +152,8 @@ def test_the_car_sensor_noise_scales_every_sensor_error():
         ({"steering_ratio": float("nan")}, "steering_ratio=nan"),
         ({"wheel_inertia": "heavy"}, "wheel_inertia='heavy'"),
         ({"assist_gain": True}, "assist_gain=True"),
-        ("sport", "vehicle='sport'"),
-        (1.5, "vehicle=1.5"),
+        ("sport", "Got 'sport' instead"),
+        (1.5, "Got 1.5 instead"),
     ],
 )
 def test_a_bad_vehicle_names_the_parameter_and_value(vehicle, message):

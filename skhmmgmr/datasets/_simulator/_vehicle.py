@@ -1,8 +1,10 @@
 """Vehicle and steering-system parameters of the simulator, and their steady-state relations.
 
-The equations are integrated inline in :mod:`._simulator` (a tight loop over Python floats is an
-order of magnitude faster than calling functions per step); this module holds the parameters and
-the closed-form relations the virtual driver's internal model uses.
+This module holds the parameters, the closed-form relations the virtual driver's internal model
+uses, and the vehicle's equations of motion (:func:`single_track`); the steering system's step
+is :mod:`._steering`'s, and :mod:`._closed_loop` integrates both with the driver. Every step
+function works on Python floats with its constants bound once per simulation: a tight loop
+over floats is an order of magnitude faster than NumPy on arrays of one element.
 
 Vehicle: single-track (bicycle) model at constant forward speed ``u`` with lateral velocity ``v``
 and yaw rate ``r`` at the centre of mass, front/rear tyre forces ``F = F_max tanh(C alpha / F_max)``
@@ -160,6 +162,52 @@ class VehicleParameters:
         g0, g1 = 1.0 + self.assist_gain, self.assist_gain_slope
         magnitude = (math.sqrt(g0 * g0 + 4.0 * g1 * abs(load)) - g0) / (2.0 * g1)
         return math.copysign(magnitude, load)
+
+
+def single_track(vehicle, speed):
+    """The vehicle's equations of motion on the road at ``speed`` [m/s] (module docstring).
+
+    Returns
+    -------
+    rates : callable
+        ``rates(road_wheel, v, r, phi, phi_d, e_y, e_psi, kappa) -> (aligning, v_d, r_d, a_y,
+        phi_dd, s_d, e_y_d)``: from the steering-wheel angle that steers the road wheels
+        (``road_wheel``, the wheel's or the lower column's, divided by the steering ratio
+        here), the lateral velocity, the yaw rate, the roll angle and velocity, the lateral
+        and heading deviations from the road's centreline and its curvature ``kappa``, the
+        front tyres' aligning torque at the steering wheel, the derivatives of the lateral
+        velocity and the yaw rate, the lateral acceleration, the roll acceleration, and the
+        speeds along and across the road.
+    """
+    u = speed
+    m, iz, lf, lr = vehicle.mass, vehicle.yaw_inertia, vehicle.front_distance, vehicle.rear_distance
+    cf, cr = vehicle.front_cornering_stiffness, vehicle.rear_cornering_stiffness
+    f_max = vehicle.friction_coefficient * vehicle.front_load
+    r_max = vehicle.friction_coefficient * vehicle.rear_load
+    ms_h = vehicle.sprung_mass * vehicle.roll_arm
+    ix, c_roll = vehicle.roll_inertia, vehicle.roll_damping
+    k_roll = vehicle.roll_stiffness - ms_h * GRAVITY
+    ratio = vehicle.steering_ratio
+    t_mech, t_pneu = vehicle.mechanical_trail, vehicle.pneumatic_trail
+    slip_t = vehicle.pneumatic_trail_slip
+    tanh, sin, cos = math.tanh, math.sin, math.cos
+
+    def rates(road_wheel, v, r, phi, phi_d, e_y, e_psi, kappa):
+        # tyres (saturating), the aligning torque of the front ones, the body, the road
+        alpha_f = road_wheel / ratio - (v + lf * r) / u
+        alpha_r = (lr * r - v) / u
+        force_f = f_max * tanh(cf * alpha_f / f_max)
+        force_r = r_max * tanh(cr * alpha_r / r_max)
+        trail = t_mech + t_pneu * max(0.0, 1.0 - abs(alpha_f) / slip_t)
+        v_d = (force_f + force_r) / m - u * r
+        r_d = (lf * force_f - lr * force_r) / iz
+        a_y = v_d + u * r
+        phi_dd = (ms_h * a_y - k_roll * phi - c_roll * phi_d) / ix
+        s_d = (u * cos(e_psi) - v * sin(e_psi)) / (1.0 - kappa * e_y)
+        e_y_d = u * sin(e_psi) + v * cos(e_psi)
+        return force_f * trail / ratio, v_d, r_d, a_y, phi_dd, s_d, e_y_d
+
+    return rates
 
 
 #: What :func:`draw_vehicle` draws, uniformly within ``(low, high)``: parameter name of
