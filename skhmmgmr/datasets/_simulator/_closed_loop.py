@@ -114,6 +114,7 @@ def simulate(section, n_samples, torque_source=None, initial=None, column_log=No
                 t_hand = torque_source(row, states)
                 log[row] = (*states, t_hand if bar_torque is None else sensed)
                 row += 1
+        # the torque at the steering wheel enters the column here, and only here
         theta_dd, theta_c, theta_c_d, sensed = column(
             t_hand, sensed, aligning, theta_d, theta_c, theta_c_d
         )

@@ -56,6 +56,10 @@ def drive(
           at a time, its inputs found by name likewise;
         - a callable ``driver(row) -> torque``, ``row`` an array of the 18 sensed features in
           the order of :data:`FEATURE_NAMES` (read-only), called once per sample in time order.
+
+        A pipeline whose velocity filter was made for another sampling period than
+        ``1 / sampling_rate`` is refused, as its ``predict`` refuses such rows; a torque that is
+        not one real, finite number is refused naming the driver and the time.
     setting, duration, sampling_rate, speed_kmh, scenario : see :func:`make_lane_keeping`
     random_state, road_random_state : see :func:`make_lane_keeping`
         The same values give the same road, manoeuvres and sensor errors for every driver.

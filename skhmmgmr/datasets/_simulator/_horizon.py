@@ -75,7 +75,8 @@ def torque_ahead(
     model : fitted estimator
         A fitted model of the package with ``filter_stream()`` (an
         :class:`~skhmmgmr.HMMGMRRegressor` or a torque pipeline) whose inputs are sensed
-        features, found by name (``feature_names_in_``), as for :func:`drive`.
+        features, found by name (``feature_names_in_``), and one output, as for :func:`drive`
+        (a pipeline made for another sampling period is refused likewise).
     horizons : sequence of float, default=(0.25, 0.5, 1.0, 2.0)
         How far ahead [s], each ``>= 0`` and a whole number of sampling periods, all
         different; 0 is the model's filtered estimate at ``t``.

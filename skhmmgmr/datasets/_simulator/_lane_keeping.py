@@ -51,7 +51,8 @@ def make_lane_keeping(
     Parameters
     ----------
     duration : float, default=300.0
-        Length of the recording [s].
+        Length of the recording [s]. A section holds at most 5,000,000 integration steps
+        (about 7 hours at 100 Hz) and 1000 km of road: simulate longer drives as several.
     setting : int, default=7
         Radius setting of Table B.1: 1 S (300-600 m), 2 M (600-900), 3 L (900-1200),
         4 SM (300-900), 5 ML (600-1200), 6 SL (300-600 and 900-1200), 7 SML (300-1200).
@@ -59,7 +60,7 @@ def make_lane_keeping(
         A key of :data:`DRIVER_STYLES` ("defensive", "aggressive", "novice") or parameters.
         Each recording draws its own parameters around the style's (per-recording variability).
     speed_kmh : float, default=100.0
-        Constant forward speed [km/h] (the thesis drives at 100 km/h).
+        Constant forward speed [km/h], at least 5 (the thesis drives at 100 km/h).
     sampling_rate : float, default=100.0
         Logging rate [Hz]. The model is integrated at a multiple of it, at least 200 Hz.
     scenario : {"highway", "sharp_corners", "lane_change", "evasive", "wide_lane"}, \
