@@ -41,6 +41,19 @@ _MOVES = {
         "_panel": "_panel",
         "datasets._schema": "_schema",
     },
+    "skhmmgmr.datasets._simulator": {
+        "datasets._driver": "_driver",
+        "datasets._road": "_road",
+        "datasets._sensors": "_sensors",
+        "datasets._vehicle": "_vehicle",
+    },
+    "skhmmgmr.datasets._comma2k19": {
+        "datasets._comma2k19_can": "_can",
+        "datasets._fetch": "_fetch",
+    },
+    "skhmmgmr.datasets._recordings": {
+        "datasets._resample": "_resample",
+    },
     "skhmmgmr._hmm": {
         "_kernels": "_kernels",
         "_gaussian": "_gaussian",
