@@ -3,7 +3,6 @@
 The public face of the feature selectors of the selection family (:mod:`skhmmgmr.selection`).
 """
 
-from ._core._public import publish
 from .selection._selectors._exhaustive import ExhaustiveFeatureSelector
 from .selection._selectors._forward import ForwardFeatureSelector
 from .selection._selectors._spearman import SpearmanSelector, spearman_relevance
@@ -14,5 +13,3 @@ __all__ = [
     "SpearmanSelector",
     "spearman_relevance",
 ]
-
-publish(globals())

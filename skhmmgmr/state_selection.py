@@ -3,9 +3,6 @@
 The public face of the state selection of the selection family (:mod:`skhmmgmr.selection`).
 """
 
-from ._core._public import publish
 from .selection._selectors._states import StateSelector, select_n_states, state_choices
 
 __all__ = ["StateSelector", "select_n_states", "state_choices"]
-
-publish(globals())

@@ -14,6 +14,7 @@ from .._core._compat import (
 )
 from .._core._docstrings import fill_shared_parameters
 from .._core._panel import read_layout, recordings_of
+from .._core._pickled import PickleVersionMixin
 from ._table import (
     PREDICT_MODE,
     SAMPLING_PERIOD,
@@ -34,7 +35,7 @@ class UngroupedScoringWarning(UserWarning):
     """A scorer received no ``groups`` and scored the whole fold as one recording."""
 
 
-class _RecordingScorer(_MetadataRequester):
+class _RecordingScorer(PickleVersionMixin, _MetadataRequester):
     """Base of the per-recording scorers: prediction per recording and metadata routing.
 
     Subclasses define ``_score_predictions(y_true, y_pred, groups, sampling_period, time)``

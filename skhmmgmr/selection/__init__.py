@@ -6,7 +6,6 @@ selectors (``_selectors``, public through :mod:`skhmmgmr.feature_selection`,
 that runs them in turn.
 """
 
-from .._core._public import publish
 from ._candidates import candidate_subsets, compare_subsets, feature_relevance
 from ._framework import SelectionReport, select_parameters
 from ._search._score_tables import one_way_anova
@@ -21,5 +20,3 @@ __all__ = [
     "one_way_anova",
     "select_parameters",
 ]
-
-publish(globals())

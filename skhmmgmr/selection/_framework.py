@@ -31,6 +31,7 @@ from threadpoolctl import threadpool_limits
 
 from .._core._compat import FiniteInterval, Interval, validate_params
 from .._core._docstrings import fill_shared_parameters
+from .._core._pickled import PickleVersionMixin
 from .._core._schema import TARGET
 from ..metrics._scores import evaluate_recordings, normalize_performance
 from ..metrics._scores import trade_offs as all_trade_offs
@@ -53,7 +54,7 @@ from ._sources import (
 
 
 @dataclass
-class SelectionReport:
+class SelectionReport(PickleVersionMixin):
     """Everything :func:`select_parameters` found; every table is a pandas DataFrame.
 
     Attributes

@@ -20,6 +20,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from ..._core._compat import HasMethods
 from ..._core._docstrings import fill_shared_parameters
 from ..._core._panel import align_target, read_layout, recordings_of
+from ..._core._pickled import PickleVersionMixin
 from ..._core._validation import check_finite, check_target_finite, column_names_of
 from ...estimator import HMMGMRRegressor
 from ...metrics._table import SAMPLING_PERIOD, WEIGHT
@@ -237,7 +238,7 @@ def read_search_inputs(selector, X, y, groups, *, min_samples=1):
     return X, y, groups
 
 
-class RecordingSelector(RecordingSearchMixin, SelectorMixin, BaseEstimator):
+class RecordingSelector(PickleVersionMixin, RecordingSearchMixin, SelectorMixin, BaseEstimator):
     """Feature selector over recordings (fit on training, judge on validation recordings)."""
 
     def _get_support_mask(self):
