@@ -66,7 +66,7 @@ COLUMNS = {"model": [str], "recording": [str, list, tuple]}
 
 
 @validate_params(
-    {**arrays("y_true", "y_pred", "groups"), "multioutput": MULTIOUTPUT},
+    arrays("y_true", "y_pred", "groups") | {"multioutput": MULTIOUTPUT},
     prefer_skip_nested_validation=True,
 )
 @fill_shared_parameters
@@ -102,11 +102,8 @@ def accuracy_score(y_true, y_pred, *, groups=None, multioutput="uniform_average"
 
 
 @validate_params(
-    {
-        **arrays("y_pred", "time", "groups"),
-        "sampling_period": SAMPLING_PERIOD,
-        "multioutput": MULTIOUTPUT,
-    },
+    arrays("y_pred", "time", "groups")
+    | {"sampling_period": SAMPLING_PERIOD, "multioutput": MULTIOUTPUT},
     prefer_skip_nested_validation=True,
 )
 @fill_shared_parameters
@@ -150,8 +147,8 @@ def smoothness_score(
 
 
 @validate_params(
-    {
-        **arrays("y_true", "y_pred", "time", "groups"),
+    arrays("y_true", "y_pred", "time", "groups")
+    | {
         "accuracy_weight": WEIGHT,
         "smoothness_weight": WEIGHT,
         "sampling_period": SAMPLING_PERIOD,
@@ -227,7 +224,7 @@ def performance_score(
 
 
 @validate_params(
-    {**arrays("y_true", "y_pred", "groups", "time"), "sampling_period": SAMPLING_PERIOD},
+    arrays("y_true", "y_pred", "groups", "time") | {"sampling_period": SAMPLING_PERIOD},
     prefer_skip_nested_validation=True,
 )
 @fill_shared_parameters
@@ -313,10 +310,10 @@ def trade_offs(step=10):
     {
         "table": [pd.DataFrame],
         "weights": TRADE_OFFS,
-        **COLUMNS,
         "accuracy": [str],
         "smoothness": [str],
-    },
+    }
+    | COLUMNS,
     prefer_skip_nested_validation=True,
 )
 def normalize_performance(
@@ -423,13 +420,8 @@ def normalize_performance(
 
 
 @validate_params(
-    {
-        "scores": [pd.DataFrame],
-        "average": ["boolean"],
-        "score": [str],
-        **COLUMNS,
-        "trade_off": [str],
-    },
+    {"scores": [pd.DataFrame], "average": ["boolean"], "score": [str], "trade_off": [str]}
+    | COLUMNS,
     prefer_skip_nested_validation=True,
 )
 def rank_models(

@@ -200,8 +200,8 @@ def candidate_subsets(
         "groups": ["array-like"],
         "subsets": [Mapping],
         "trade_off": TRADE_OFF,
-        **search_constraints("cv", "estimator", "sampling_period", "n_jobs", "memory", "verbose"),
-    },
+    }
+    | search_constraints("cv", "estimator", "sampling_period", "n_jobs", "memory", "verbose"),
     prefer_skip_nested_validation=False,  # the estimator's own parameters are checked in fit
 )
 @fill_shared_parameters

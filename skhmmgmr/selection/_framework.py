@@ -188,8 +188,8 @@ def _fit_on(estimator, X, y, groups, rows, features, n_states):
         "screening_tol": [FiniteInterval(Real, 0, None, closed="neither"), None],
         "progress": ["boolean"],
         "random_state": ["random_state"],
-        **search_constraints("sampling_period", "estimator", "n_jobs", "memory"),
-    },
+    }
+    | search_constraints("sampling_period", "estimator", "n_jobs", "memory"),
     prefer_skip_nested_validation=False,  # the estimator's own parameters are checked in fit
 )
 @fill_shared_parameters

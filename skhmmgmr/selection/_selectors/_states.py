@@ -276,11 +276,11 @@ class StateSelector(PickleVersionMixin, RecordingSearchMixin, RegressorMixin, Ba
         "X": ["array-like", "sparse matrix"],  # sparse: refused by fit, saying what to do
         "y": ["array-like"],
         "groups": ["array-like", None],
-        **K_RANGE,
         "tol": TOL,
         "trade_offs": [str, list, tuple, None],
-        **search_constraints("estimator", "cv", "sampling_period", "n_jobs", "memory", "verbose"),
-    },
+    }
+    | K_RANGE
+    | search_constraints("estimator", "cv", "sampling_period", "n_jobs", "memory", "verbose"),
     prefer_skip_nested_validation=False,  # the estimator's own parameters are checked in fit
 )
 @fill_shared_parameters
