@@ -13,6 +13,7 @@ estimates. Recordings are short (8 s at 20 Hz) to keep the suite fast.
 
 import ctypes
 import re
+import runpy
 import shutil
 import subprocess
 import warnings
@@ -40,6 +41,7 @@ RTOL = 1e-10
 VERSIONS = ("2.0", "3.0")
 STRICT = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic", "-fPIC", "-shared"]
 HEADERS = Path(fmpy.__file__).parent / "c-code"
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -465,3 +467,12 @@ def test_unit_texts_are_read_into_base_units(unit, expected):
 
 def test_every_unit_of_the_schema_is_declared():
     assert all(base_units(unit) for unit in [*FEATURE_UNITS.values(), "Nm"])
+
+
+def test_the_user_guide_example_runs_and_reproduces_predict(capsys, monkeypatch, tmp_path):
+    monkeypatch.chdir(tmp_path)
+    runpy.run_path(str(ROOT / "docs" / "user_guide" / "fmu_example.py"), run_name="__main__")
+    printed = capsys.readouterr().out
+    match = re.fullmatch(r"400 steps; largest difference from predict: (\S+) Nm\n", printed)
+    assert match and float(match.group(1)) < 1e-9, printed
+    assert list(tmp_path.iterdir()) == []  # the FMU was written in a temporary folder
