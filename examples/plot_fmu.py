@@ -8,6 +8,8 @@ C filter of :func:`~skhmmgmr.export.write_c`, an FMI wrapper and a binary for th
 example fits a torque pipeline on simulated drivers, writes its FMU for FMI 2.0 and 3.0, lets
 FMPy check both, and runs them as a simulator would: one communication step per sample, the
 sensed signals of a test recording as inputs. The FMU's torque is ``predict``'s, to round-off.
+Then an FMU drives the package's simulator (:func:`~skhmmgmr.datasets.drive` takes an FMU as
+its driver), on the same road as the model it was written from.
 
 It needs a C compiler (``cc``) and FMPy (``pip install "skhmmgmr[fmu]"``). The user guide page
 "Using the model in a vehicle simulator" describes the FMU's variables and how it steps.
@@ -20,11 +22,13 @@ from pathlib import Path
 import fmpy
 import matplotlib.pyplot as plt
 import numpy as np
+import pandas as pd
 from fmpy.validation import validate_fmu
 
-from skhmmgmr import make_torque_pipeline
-from skhmmgmr.datasets import FEATURE_NAMES, make_driving_protocol
+from skhmmgmr import HMMGMRRegressor, make_torque_pipeline
+from skhmmgmr.datasets import FEATURE_NAMES, PREVIEW_FEATURES, drive, make_driving_protocol
 from skhmmgmr.export import write_fmu
+from skhmmgmr.metrics import lane_keeping_metrics
 
 quick = bool(os.environ.get("SKHMMGMR_DOCS_QUICK"))
 rate = 20.0
@@ -102,5 +106,43 @@ top.legend(ncol=3, fontsize=8)
 bottom.set_ylabel("FMU - predict [Nm]")
 bottom.set_xlabel("time [s]")
 bottom.legend(fontsize=8)
+fig.tight_layout()
+plt.show()
+
+# %%
+# The FMU at the wheel
+# --------------------
+# A model of what the driver sees of the road (the lane position, the heading and the
+# curvature ahead) keeps the lane in the closed loop, where models of the steering system's own
+# states do not (user guide, "Closed loop"). Its FMU, run by :func:`~skhmmgmr.datasets.drive`
+# through FMPy, drives the same road with the same sensor errors as the Python model, sample
+# for sample.
+preview = list(PREVIEW_FEATURES)
+driver = HMMGMRRegressor(n_states=3, output_smoothing="auto", random_state=0)
+driver.fit(train[preview], train["driver_torque"], groups=train["recording"])
+settings = {"duration": 30.0 if quick else 120.0, "sampling_rate": rate, "random_state": 1}
+with tempfile.TemporaryDirectory() as folder:
+    path = write_fmu(driver, Path(folder) / "preview.fmu", sampling_period=period)
+    by_fmu = drive(path, **settings)
+by_model = drive(driver, **settings)
+human = drive("defensive", **settings)
+columns = [*FEATURE_NAMES, "driver_torque"]
+largest = np.max(np.abs(by_fmu[columns].to_numpy() - by_model[columns].to_numpy()))
+print(f"the FMU's drive against the model's: largest difference {largest:.1e}")
+print(
+    lane_keeping_metrics(pd.concat([human, by_model, by_fmu]))[
+        ["lateral_deviation_rms", "departures", "torque_rms"]
+    ]
+)
+fig, ax = plt.subplots(figsize=(8, 3))
+for frame, style, label in (
+    (human, "-", "human (defensive)"),
+    (by_model, "-", "model"),
+    (by_fmu, ":", "its FMU"),
+):
+    ax.plot(frame["time"], frame["lateral_deviation_0m"], style, lw=1.5, label=label)
+ax.set_xlabel("time [s]")
+ax.set_ylabel("lateral deviation [m]")
+ax.legend(fontsize=8)
 fig.tight_layout()
 plt.show()

@@ -16,6 +16,7 @@ import re
 import runpy
 import shutil
 import subprocess
+import sys
 import warnings
 import zipfile
 from dataclasses import dataclass
@@ -26,7 +27,13 @@ import pytest
 from sklearn.exceptions import ConvergenceWarning
 
 from skhmmgmr import HierarchicalHMMGMRRegressor, HMMGMRRegressor, make_torque_pipeline
-from skhmmgmr.datasets import FEATURE_NAMES, FEATURE_UNITS, PREVIEW_FEATURES, make_driving_protocol
+from skhmmgmr.datasets import (
+    FEATURE_NAMES,
+    FEATURE_UNITS,
+    PREVIEW_FEATURES,
+    drive,
+    make_driving_protocol,
+)
 from skhmmgmr.export import write_fmu
 from skhmmgmr.export._fmu_description import base_units
 
@@ -39,6 +46,7 @@ pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (cc) on this m
 PERIOD = 0.05
 RTOL = 1e-10
 VERSIONS = ("2.0", "3.0")
+DRIVEN = {"sampling_period": PERIOD}
 STRICT = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic", "-fPIC", "-shared"]
 HEADERS = Path(fmpy.__file__).parent / "c-code"
 ROOT = Path(__file__).resolve().parents[1]
@@ -476,3 +484,103 @@ def test_the_user_guide_example_runs_and_reproduces_predict(capsys, monkeypatch,
     match = re.fullmatch(r"400 steps; largest difference from predict: (\S+) Nm\n", printed)
     assert match and float(match.group(1)) < 1e-9, printed
     assert list(tmp_path.iterdir()) == []  # the FMU was written in a temporary folder
+
+
+# -- the FMU at the wheel of the simulator ----------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def preview_model(protocol):
+    """A model of what the driver sees of the road, with its read-out: it keeps the lane."""
+    model = HMMGMRRegressor(n_states=3, n_iter=10, output_smoothing=2.0, random_state=0)
+    return _fit(model, protocol, list(PREVIEW_FEATURES), "driver_torque")
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+def test_the_fmu_drives_as_the_model_it_was_written_from(preview_model, version, tmp_path):
+    path = write_fmu(preview_model, tmp_path / "preview.fmu", fmi_version=version, **DRIVEN)
+    settings = {"duration": 20.0, "sampling_rate": 1 / PERIOD, "random_state": 1}
+    by_model = drive(preview_model, **settings)
+    by_fmu = drive(path if version == "2.0" else str(path), **settings)
+    assert by_model.attrs["lost_control"] is None and by_fmu.attrs["lost_control"] is None
+    assert by_fmu["driver"].iloc[0] == "preview.fmu"
+    assert by_fmu["recording"].iloc[0] == "preview.fmu-highway-s7"
+    columns = [*FEATURE_NAMES, "driver_torque"]
+    assert by_fmu.shape == by_model.shape
+    np.testing.assert_allclose(by_fmu[columns], by_model[columns], rtol=1e-9, atol=1e-12)
+    assert list(tmp_path.iterdir()) == [path]  # the extracted FMU removed
+
+
+def test_the_pipelines_fmu_drives_as_the_pipeline(models, tmp_path):
+    """The velocity filter and the read-out in the loop."""
+    model = models["pipeline"][0]
+    path = write_fmu(model, tmp_path / "pipeline.fmu")
+    settings = {"duration": 6.0, "sampling_rate": 1 / PERIOD, "random_state": 1}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        by_model, by_fmu = drive(model, **settings), drive(path, **settings)
+    assert by_fmu.attrs["lost_control"] == by_model.attrs["lost_control"]
+    assert len(caught) == 2 * (by_model.attrs["lost_control"] is not None)
+    columns = [*FEATURE_NAMES, "driver_torque"]
+    np.testing.assert_allclose(by_fmu[columns], by_model[columns], rtol=1e-9, atol=1e-12)
+
+
+def test_drive_refuses_an_fmu_it_cannot_run(preview_model, protocol, tmp_path, monkeypatch):
+    path = write_fmu(preview_model, tmp_path / "fast.fmu", sampling_period=0.01)
+    with pytest.raises(ValueError, match=r"steps every 0.01 s .* sampling_rate=100.0"):
+        drive(path, duration=2.0, sampling_rate=1 / PERIOD)
+    renamed = protocol.rename(columns={"road_curvature_0m": "curvature"})
+    inputs = ["curvature", *PREVIEW_FEATURES[3:]]
+    unsensed = _fit(HMMGMRRegressor(n_states=2, n_iter=3), renamed, inputs, "driver_torque")
+    other = write_fmu(unsensed, tmp_path / "other.fmu", sampling_period=PERIOD)
+    with pytest.raises(ValueError, match=r"reads \['curvature'\], which the simulator does not"):
+        drive(other, duration=2.0, sampling_rate=1 / PERIOD)
+    with pytest.raises(FileNotFoundError, match="missing.fmu"):
+        drive(tmp_path / "missing.fmu", duration=2.0, sampling_rate=1 / PERIOD)
+    monkeypatch.setitem(sys.modules, "fmpy", None)
+    with pytest.raises(ImportError, match=r"pip install 'skhmmgmr\[fmu\]'"):
+        drive(str(path), duration=2.0, sampling_rate=100.0)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fast.fmu", "other.fmu"]
+
+
+# -- the command line -------------------------------------------------------------------------
+
+
+def test_export_fmu_command_writes_the_fmu_of_a_model_file(protocol, tmp_path, capsys):
+    from skhmmgmr.cli import main
+    from skhmmgmr.portable import load
+
+    data, model = tmp_path / "drives.csv", tmp_path / "model.json"
+    inputs = list(PREVIEW_FEATURES[:3])
+    protocol[["recording", "time", *inputs, "yaw_rate"]].to_csv(data, index=False)
+    argv = ["--quiet", "fit", str(data), "--target", "yaw_rate", "--features", *inputs]
+    assert main([*argv, "--n-states", "2", "--output", str(model)]) == 0
+    path = tmp_path / "yaw model.fmu"
+    assert main(["--quiet", "export-fmu", str(model), str(path), "--fmi-version", "3.0"]) == 0
+    assert validate_fmu(str(path)) == []
+    description = fmpy.read_model_description(str(path))
+    assert description.fmiVersion == "3.0"
+    assert description.coSimulation.modelIdentifier == "yaw_model"
+    assert float(description.defaultExperiment.stepSize) == pytest.approx(PERIOD, rel=1e-12)
+    outputs = {v.name: v.unit for v in description.modelVariables if v.causality == "output"}
+    assert outputs == {"yaw_rate": "rad/s", "yaw_rate_std": "rad/s", "update_status": None}
+    fitted = load(model)
+    first = protocol[protocol["recording"] == protocol["recording"].iloc[0]]
+    exported = Exported("command line", "3.0", fitted, path, ["yaw_rate"])
+    _close(
+        exported,
+        exported.simulate(first[inputs], np.zeros(len(first))).estimates,
+        fitted.predict(first[inputs]),
+    )
+    # refused: an existing file, a model without a sampling period, no FMPy
+    assert main(["export-fmu", str(model), str(path)]) == 2
+    assert "exists; pass --overwrite" in capsys.readouterr().err
+    assert main(["--quiet", "export-fmu", str(model), str(path), "--overwrite"]) == 0
+    argv = ["fit", str(data), "--target", "yaw_rate", "--features", *inputs, "--time", "none"]
+    untimed = tmp_path / "untimed.json"
+    assert main([*argv, "--n-states", "2", "--output", str(untimed), "--quiet"]) == 0
+    assert main(["export-fmu", str(untimed), str(tmp_path / "u.fmu")]) == 2
+    assert "pass sampling_period=" in capsys.readouterr().err
+    argv = ["--quiet", "export-fmu", str(untimed), str(tmp_path / "u.fmu")]
+    assert main([*argv, "--sampling-period", "0.05", "--sources-only"]) == 0
+    assert validate_fmu(str(tmp_path / "u.fmu")) == []

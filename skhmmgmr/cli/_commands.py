@@ -1,5 +1,5 @@
-"""Command line: ``skhmmgmr demo | select | report | fit | predict | export-c`` (``python -m
-skhmmgmr``).
+"""Command line: ``skhmmgmr demo | select | report | fit | predict | export-c | export-fmu``
+(``python -m skhmmgmr``).
 
 Errors the user can fix (a missing file or column, unreadable data, an output that would
 overwrite a file) are printed without a traceback and end with exit code 2. Reading inputs and
@@ -555,6 +555,42 @@ def command_export_c(args):
     return 0
 
 
+def command_export_fmu(args):
+    """The FMU of a model file written by ``fit`` (:func:`skhmmgmr.export.write_fmu`), with the
+    file's output names, units and sampling period."""
+    import json
+
+    from ..export import write_fmu
+
+    model, training = load_model(args.model, return_training=True)
+    path = Path(args.path)
+    check_output(path, overwrite=args.overwrite, inputs=[args.model])
+    data = json.loads(Path(args.model).read_text(encoding="utf-8"))  # load read it: valid
+    regressor = data["steps"][-1]["model"] if "steps" in data else data
+    period = args.sampling_period
+    if period is None:
+        period = training.get("sampling_period")
+    try:
+        written = write_fmu(
+            model,
+            path,
+            fmi_version=args.fmi_version,
+            name=args.name,
+            sampling_period=period,
+            output_names=regressor["output_names"],
+            units=training.get("units"),
+            binary=not args.sources_only,
+            overwrite=args.overwrite,
+        )
+    except ValueError as exc:
+        raise CommandError(f"{args.model}: {exc}") from exc
+    except (ImportError, RuntimeError) as exc:
+        raise CommandError(str(exc)) from exc
+    what = "sources only" if args.sources_only else "sources and a binary for this platform"
+    _log(args, f"Wrote {written} (FMI {args.fmi_version}, {what})")
+    return 0
+
+
 def _add_data_options(parser, *, file_order=False):
     parser.add_argument("--target", default=TARGET, help="target column")
     parser.add_argument("--recording", default=RECORDING, help="recording-id column")
@@ -775,6 +811,35 @@ def build_parser():
         "--overwrite", action="store_true", help="replace existing files of that name"
     )
     export.set_defaults(handler=command_export_c)
+
+    fmu = sub.add_parser(
+        "export-fmu",
+        help="write a model as a co-simulation Functional Mock-up Unit (.fmu)",
+        description="Write a model file as a co-simulation FMU (FMI 2.0 or 3.0) for vehicle "
+        "simulators: the model's C filter, its FMI wrapper and a binary for this platform "
+        "built with the system C compiler (cc) against FMPy's FMI headers (pip install "
+        "'skhmmgmr[fmu]'); see the user guide, 'Using the model in a vehicle simulator'.",
+        **common,
+    )
+    fmu.add_argument("model", help="model file (portable JSON) written by 'skhmmgmr fit'")
+    fmu.add_argument("path", help="the .fmu file to write")
+    fmu.add_argument("--fmi-version", choices=("2.0", "3.0"), default="2.0", help="FMI version")
+    fmu.add_argument(
+        "--name", help="model identifier: C prefix and binary name (default: the file's stem)"
+    )
+    fmu.add_argument(
+        "--sampling-period",
+        type=float,
+        help="seconds between two samples, the FMU's communication step (default: the model "
+        "file's)",
+    )
+    fmu.add_argument(
+        "--sources-only",
+        action="store_true",
+        help="no binary: an FMU of sources the importer builds (needs no compiler)",
+    )
+    fmu.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    fmu.set_defaults(handler=command_export_fmu)
     return parser
 
 

@@ -9,6 +9,7 @@ import pandas as pd
 
 from .._core._schema import FEATURE_NAMES
 from ._driver import DRIVER_STYLES
+from ._fmu_driver import FMUDriver, is_fmu
 from ._sensors import SensorStream, draw_errors
 from ._simulator import (
     LOST_CONTROL,
@@ -49,7 +50,7 @@ def drive(
 
     Parameters
     ----------
-    driver : str, fitted estimator or callable
+    driver : str, fitted estimator, path-like or callable
         Who drives:
 
         - a style of :data:`DRIVER_STYLES` (``"defensive"``, ``"aggressive"``, ``"novice"``):
@@ -60,7 +61,13 @@ def drive(
         - another fitted scikit-learn regressor (anything with ``predict``): called on one row
           at a time, its inputs found by name likewise;
         - a callable ``driver(row) -> torque``, ``row`` an array of the 18 sensed features in
-          the order of :data:`FEATURE_NAMES` (read-only), called once per sample in time order.
+          the order of :data:`FEATURE_NAMES` (read-only), called once per sample in time order;
+        - a co-simulation FMU, FMI 2.0 or 3.0 (a path-like, or a string ending in ``.fmu``;
+          :func:`skhmmgmr.export.write_fmu` writes them), run through FMPy (the extra
+          ``skhmmgmr[fmu]``): its inputs found by name among the sensed features, one
+          communication step of ``1 / sampling_rate`` per sample (the FMU's default step size
+          must be that), its torque the output ``driver_torque`` (else its first real
+          output). Its drive is that of the model it was written from, to round-off.
     setting, duration, sampling_rate, speed_kmh, scenario : see :func:`make_lane_keeping`
     random_state, road_random_state : see :func:`make_lane_keeping`
         The same values give the same road, manoeuvres and sensor errors for every driver.
@@ -68,8 +75,8 @@ def drive(
         The errors of what the driver model is given and what the frame holds (see
         :func:`make_lane_keeping`); a human always sees the true states.
     recording : str, default=None
-        Recording id; defaults to ``"{driver}-{scenario}-s{setting}"`` (the model's class name
-        or the callable's name for a model).
+        Recording id; defaults to ``"{driver}-{scenario}-s{setting}"`` (the model's class name,
+        the FMU's file name or the callable's name for a model).
     split : str, default="test"
         Value of the ``split`` column.
     vehicle : None, "default", int, dict or VehicleParameters, default=None
@@ -127,11 +134,11 @@ def drive(
     duration, sampling_rate, speed_kmh, setting, scenario, vehicle = checked_section_arguments(
         duration, sampling_rate, speed_kmh, setting, scenario, sensor_noise, vehicle
     )
-    if isinstance(driver, str):
+    if isinstance(driver, str) and not is_fmu(driver):
         if driver not in DRIVER_STYLES:
             raise ValueError(
                 f"Unknown driver style driver={driver!r}; expected one of "
-                f"{sorted(DRIVER_STYLES)}, a fitted model or a callable."
+                f"{sorted(DRIVER_STYLES)}, a fitted model, an FMU (a .fmu path) or a callable."
             )
         return make_lane_keeping(
             duration,
@@ -147,7 +154,6 @@ def drive(
             sensor_noise=sensor_noise,
             vehicle=vehicle,
         )
-    name, torque_of = _torque_function(driver)
     section = Section(
         duration,
         setting,
@@ -164,6 +170,8 @@ def drive(
     errors = None if scale is None else draw_errors(section.n_samples, dt, scale, section.rng)
     sensors = SensorStream(FEATURE_NAMES, errors, dt, section.speed, scale)
     sensed = np.empty((section.n_samples, len(FEATURE_NAMES)))
+    fmu = FMUDriver(driver, sampling_rate) if is_fmu(driver) else None
+    name, torque_of = (fmu.name, fmu) if fmu is not None else _torque_function(driver)
 
     def torque_source(row, states):
         sensed[row] = sense(section, sensors, row, states)
@@ -175,7 +183,11 @@ def drive(
             view.flags.writeable = True
         return _as_torque(torque, name, row / sampling_rate)
 
-    log = section.simulate(torque_source)
+    try:
+        log = section.simulate(torque_source)
+    finally:
+        if fmu is not None:
+            fmu.close()
     n_driven = log.shape[0]
     # the torque sensor reads the log's torque: the driver's own with a rigid column, the
     # torsion bar's with a compliant one
@@ -228,7 +240,8 @@ def _torque_function(driver):
     if callable(driver):
         return getattr(driver, "__name__", type(driver).__name__), driver
     raise TypeError(
-        f"driver must be a style name, a fitted model or a callable; got {type(driver).__name__}."
+        f"driver must be a style name, a fitted model, an FMU (a .fmu path) or a callable; "
+        f"got {type(driver).__name__}."
     )
 
 
