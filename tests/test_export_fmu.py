@@ -408,6 +408,20 @@ def test_the_same_model_gives_the_same_fmu(models, tmp_path):
         assert a.namelist()[0] == "modelDescription.xml"
 
 
+def test_units_given_complete_and_override_the_schemas(models, tmp_path):
+    model, _, keywords = models["regressor"]
+    units = {"driver_torque": "N.m", "steering_wheel_angle": "deg"}  # "deg": not readable
+    path = write_fmu(model, tmp_path / "u.fmu", binary=False, units=units, **keywords)
+    assert validate_fmu(str(path)) == []
+    description = fmpy.read_model_description(str(path))
+    declared = {v.name: v.unit for v in description.modelVariables}
+    assert declared["driver_torque"] == declared["driver_torque_std"] == "N.m"
+    assert declared["steering_wheel_angle"] is None  # a unit without base units: none
+    assert declared["steering_wheel_velocity"] == "rad/s"  # the schema's
+    definitions = {u.name: u.baseUnit for u in description.unitDefinitions}
+    assert (definitions["N.m"].kg, definitions["N.m"].m, definitions["N.m"].s) == (1, 2, -2)
+
+
 def test_refused_with_a_clear_error(models, tmp_path, monkeypatch):
     model, _, keywords = models["regressor"]
     pipeline = models["pipeline"][0]
@@ -435,6 +449,8 @@ def test_refused_with_a_clear_error(models, tmp_path, monkeypatch):
             sampling_period=PERIOD,
             output_names=["steering_wheel_angle", "yaw_rate"],
         )
+    with pytest.raises(ValueError, match=r"units names \['torque'\], which are neither"):
+        write_fmu(model, tmp_path / "m.fmu", units={"torque": "Nm"}, **keywords)
     with pytest.raises(ValueError, match="C identifier"):
         write_fmu(model, tmp_path / "m.fmu", name="my-model", **keywords)
     (tmp_path / "taken.fmu").write_bytes(b"")

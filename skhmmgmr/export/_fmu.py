@@ -245,7 +245,8 @@ def write_fmu(
     ValueError
         For a model :func:`write_c` refuses, an ``fmi_version`` other than "2.0" and "3.0",
         a path not ending in ``.fmu``, a missing or conflicting ``sampling_period``, output
-        names of the wrong number or clashing with the inputs.
+        names of the wrong number or clashing with the inputs, ``units`` of a name that is no
+        input or output.
     ImportError
         With ``binary``, when FMPy (the FMI headers) is not installed:
         ``pip install 'skhmmgmr[fmu]'``.

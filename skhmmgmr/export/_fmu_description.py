@@ -125,9 +125,16 @@ def describe(model_identifier, description, input_names, output_names, units, sa
     ------
     ValueError
         For two variables of the same name (an output named as an input, ``<output>_std`` or
-        ``update_status`` taken).
+        ``update_status`` taken), or a ``units`` name that is no input or output.
     """
-    known = {**FEATURE_UNITS, TARGET: TARGET_UNIT, **dict(units or {})}
+    units = {str(name): str(unit) for name, unit in dict(units or {}).items()}
+    unknown = sorted(set(units) - {*input_names, *output_names})
+    if unknown:
+        raise ValueError(
+            f"units names {unknown}, which are neither inputs nor outputs of the model (inputs "
+            f"{list(input_names)}, outputs {list(output_names)})"
+        )
+    known = {**FEATURE_UNITS, TARGET: TARGET_UNIT, **units}
     n_inputs, n_outputs = len(input_names), len(output_names)
     variables = [FMUVariable("time", TIME_REFERENCE, "independent", "real", "s", "Time")]
     reference = TIME_REFERENCE + 1
