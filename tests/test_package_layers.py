@@ -27,9 +27,9 @@ LAYERS = (
     # what uses the estimator: the torque pipeline; the selection family (the search over
     # recordings, the selectors, the framework)
     ("torque_pipeline", "selection"),
-    # the model file of any fitted model (the regressor, the torque pipeline); the C code of a
-    # fitted regressor or torque pipeline; the public faces of the selectors and of the users'
-    # checks, which live in the selection family
+    # the model file of any fitted model (the regressor, the torque pipeline); the C code and
+    # the FMU of a fitted regressor or torque pipeline; the public faces of the selectors and
+    # of the users' checks, which live in the selection family
     ("portable", "export", "feature_selection", "state_selection", "utils"),
     # the command line and its report
     ("cli",),
