@@ -371,6 +371,27 @@ class GaussianEmissions(ABC):
         dims = np.asarray(dims)
         return self._with(self.means[:, dims], self.full_covariances[:, dims][:, :, dims])
 
+    def split(self, state, offset):
+        """The same densities with ``state`` split in two, the new one last.
+
+        The two halves are centred at ``mean -/+ offset`` (``offset`` of shape (n_dims,)); a
+        full covariance loses ``offset offset^T``, so that an equal mixture of the halves has
+        the state's mean and covariance (a moment-preserving split; ``offset`` must keep it
+        positive definite). A shared (tied) covariance stays as it is.
+        """
+        offset = np.asarray(offset, dtype=float)
+        means = np.vstack([self.means, self.means[state] + offset])
+        means[state] = self.means[state] - offset
+        full = np.concatenate([self.full_covariances, self.full_covariances[state : state + 1]])
+        return self._with(means, self._split_covariances(full, state, offset))
+
+    @staticmethod
+    def _split_covariances(full, state, offset):
+        """Covariances (n_states + 1, n_dims, n_dims) of :meth:`split`, ``state``'s copied
+        last; a family that keeps one covariance per state takes ``offset offset^T`` off
+        both halves."""
+        return full
+
     def rescaled(self, center, scale):
         """The densities of ``center + scale * x`` (a change of units of every column)."""
         return self._with(
@@ -471,6 +492,12 @@ class FullCovariance(GaussianEmissions):
 
     def _with(self, means, full_covariances):
         return FullCovariance(means, full_covariances)
+
+    @staticmethod
+    def _split_covariances(full, state, offset):
+        shrunk = full[state] - np.outer(offset, offset)
+        full[state] = full[-1] = shrunk
+        return full
 
     def _map_covariances(self, scatter, means, weights, relevance):
         moved = self.means - means
