@@ -15,6 +15,7 @@ from pathlib import Path
 import pandas as pd
 
 from .._core._schema import META_COLUMNS
+from .._core._sequences import median_time_step
 from ..datasets import RECORDING, SPLIT, TARGET, TIME
 from ._cluster import add_scheduler_option, scheduler_context
 from ._files import (
@@ -343,15 +344,15 @@ def _option(name):
 
 def _sampling_period(frame, args):
     """Seconds between two rows: ``--sampling-period``, else the median time step of the
-    recordings (``None`` without a time column)."""
+    recordings, as the torque pipeline reads it from a time index (``None`` without a time
+    column)."""
     if args.sampling_period is not None:
         if not args.sampling_period > 0:
             raise CommandError(f"--sampling-period must be positive, got {args.sampling_period}")
         return args.sampling_period
     if args.time == NO_TIME:
         return None
-    step = frame.groupby(args.recording, sort=False)[args.time].diff().median()
-    return None if pd.isna(step) else float(step)
+    return median_time_step(frame[args.time], frame[args.recording])
 
 
 def _model_to_fit(args, period):

@@ -6,11 +6,12 @@ and the rows that miss a value (read once for the filter and the read-out)."""
 
 import warnings
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._core._panel import align_target, read_layout
+from .._core._panel import in_filter_order, read_layout
 from .._core._validation import (
     check_finite,
     check_target_finite,
@@ -66,9 +67,13 @@ def read_joint_inputs(estimator, X, y, groups, time, *, fitting):
     unless the estimator reads missing values, naming the column and recording, as is a NaN
     or infinite input.
     """
-    layout = read_layout(X, groups, time, canonical=fitting)
-    y = align_target(X, y, layout)
-    X, y, groups = layout.to_filter_order(X), layout.to_filter_order(y), layout.groups
+    run = partial(_joint_inputs_in_filter_order, estimator, fitting=fitting)
+    return in_filter_order(run, X, groups, time=time, y=y, canonical=fitting)
+
+
+def _joint_inputs_in_filter_order(estimator, layout, X, y=None, *, fitting):
+    """:func:`read_joint_inputs` of rows in filter order, their recordings' ``layout``."""
+    groups = layout.groups
     allow_nan = estimator.missing_values != "error"
     check_target_finite(y, layout, allow_nan=allow_nan)
     X, y = validate_joint(estimator, X, y, allow_nan=allow_nan, reset=fitting)

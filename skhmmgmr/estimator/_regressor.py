@@ -96,9 +96,11 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         ``fit`` chooses, per output, the weakest read-out whose estimate of the training
         recordings is no rougher than the measured output there (the thesis' smoothness,
         :func:`~skhmmgmr.metrics.smoothness_score`); none when the GMR estimate already is
-        not. None or 0: the GMR estimate itself (the thesis' model). ``return_std`` gives
-        the model's predictive standard deviation either way. See the user guide, "Smooth
-        by design".
+        not, or when that read-out changes nothing that matters: the estimate's roughness by
+        less than 1 % and no training recording's accuracy by 0.1 percentage point (a model
+        without a read-out keeps model file format version 2). None or 0: the GMR estimate
+        itself (the thesis' model). ``return_std`` gives the model's predictive standard
+        deviation either way. See the user guide, "Smooth by design".
     random_state : int, RandomState instance or None, default=None
         Seed of the initialisation, for reproducible fits.
     verbose : int, default=0
