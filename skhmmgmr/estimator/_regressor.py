@@ -10,7 +10,7 @@ from sklearn.metrics import r2_score
 from sklearn.utils import metadata_routing
 from sklearn.utils.validation import check_is_fitted
 
-from .._core._compat import Interval, StrOptions, _fit_context
+from .._core._compat import FiniteInterval, Interval, StrOptions, _fit_context
 from .._core._panel import align_target
 from .._core._validation import (
     check_column_scales,
@@ -24,7 +24,13 @@ from .._hmm._emissions import EMISSION_FAMILIES, REFUSED_COVARIANCE_TYPES, emiss
 from .._hmm._fitted import FittedHMMGMR, Standardization
 from .._hmm._gmr import filter_state_probabilities, gmr_estimates, read_missing
 from .._hmm._missing import observed_counts
-from .._hmm._readout import fixed_decay, smooth_outputs, time_constant_of, weakest_decay
+from .._hmm._readout import (
+    MAX_TIME_CONSTANT,
+    fixed_decay,
+    smooth_outputs,
+    time_constant_of,
+    weakest_decay,
+)
 from .._hmm._stale_inputs import MISSING_VALUES, learn_stale_noise, stale_noise_for
 from ._adaptation import AdaptMixin
 from ._io import ModelIOMixin
@@ -88,7 +94,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         value in the recording, as a noisy observation whose variance is the variogram at its
         age (marginalised when there is none, or older than 128 samples). Infinities are
         refused either way. See the user guide, "Missing inputs".
-    output_smoothing : None, float >= 0 or "auto", default=None
+    output_smoothing : None, float in [0, 1e6] or "auto", default=None
         Time constant ``tau``, in rows, of a causal first-order read-out of the GMR estimate:
         ``estimate_t = a estimate_{t-1} + (1 - a) GMR_t`` with ``a = exp(-1 / tau)``,
         restarted at every recording (the first estimate is the GMR one). The same read-out
@@ -99,8 +105,10 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         not, or when that read-out changes nothing that matters: the estimate's roughness by
         less than 1 % and no training recording's accuracy by 0.1 percentage point (a model
         without a read-out keeps model file format version 2). None or 0: the GMR estimate
-        itself (the thesis' model). ``return_std`` gives the model's predictive standard
-        deviation either way. See the user guide, "Smooth by design".
+        itself (the thesis' model). At most 1e6 rows, the longest "auto" considers (single
+        precision, as in the C export's float32, could not tell a longer one's decay from
+        one). ``return_std`` gives the model's predictive standard deviation either way. See
+        the user guide, "Smooth by design".
     random_state : int, RandomState instance or None, default=None
         Seed of the initialisation, for reproducible fits.
     verbose : int, default=0
@@ -194,7 +202,11 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         "init_params": [StrOptions(set(INIT_METHODS))],
         "reg_covar": [Interval(Real, 0, None, closed="left")],
         "missing_values": [StrOptions(set(MISSING_VALUES))],
-        "output_smoothing": [None, Interval(Real, 0, None, closed="left"), StrOptions({"auto"})],
+        "output_smoothing": [
+            None,
+            FiniteInterval(Real, 0, MAX_TIME_CONSTANT, closed="both"),
+            StrOptions({"auto"}),
+        ],
         "random_state": ["random_state"],
         "verbose": ["verbose"],
     }
