@@ -3,8 +3,6 @@
 scikit-learn ``Pipeline`` whose recordings reach every step (:class:`TorquePipeline`,
 :func:`make_torque_pipeline`)."""
 
-from .._core._public import publish
-
 # the filter and the candidates of the "auto" choice, at the path they had as one module
 from ._derived_inputs import low_pass as low_pass
 from ._friction_search import FILTER_CANDIDATES as FILTER_CANDIDATES
@@ -13,5 +11,3 @@ from ._pipeline import TorquePipeline, make_torque_pipeline
 from ._steering_features import SteeringFeatures
 
 __all__ = ["SteeringFeatures", "TorquePipeline", "make_torque_pipeline"]
-
-publish(globals())

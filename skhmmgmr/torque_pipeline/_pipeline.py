@@ -19,6 +19,7 @@ from sklearn.utils.validation import check_is_fitted
 from .._core._compat import _routing_enabled
 from .._core._docstrings import fill_shared_parameters
 from .._core._panel import has_recording_index, in_filter_order
+from .._core._pickled import PickleVersionMixin
 from ..estimator import HMMGMRRegressor
 from ..streaming import FilterStream
 from ._friction_search import AUTO
@@ -51,7 +52,7 @@ def _needs_recordings(step):
     return step.velocity_filter != AUTO or step.sampling_period is not None
 
 
-class TorquePipeline(Pipeline):
+class TorquePipeline(PickleVersionMixin, Pipeline):
     """The :class:`~sklearn.pipeline.Pipeline` of :func:`make_torque_pipeline`: recordings
     given once reach every step that reads them.
 

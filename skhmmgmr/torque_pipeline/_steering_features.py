@@ -19,6 +19,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from .._core._compat import Interval, StrOptions, _fit_context, validate_parameter_constraints
 from .._core._docstrings import fill_shared_parameters
 from .._core._panel import in_filter_order
+from .._core._pickled import PickleVersionMixin
 from .._core._sequences import median_time_step
 from ._derived_inputs import (
     FRICTION_NAME,
@@ -33,7 +34,7 @@ from ._friction_search import AUTO, friction_search, search_candidates
 
 
 @fill_shared_parameters
-class SteeringFeatures(TransformerMixin, BaseEstimator):
+class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     """Append the friction and load-compression inputs of a power-assisted steering system.
 
     Only the ``"auto"`` settings are learned: ``fit`` chooses the friction band and the
