@@ -295,6 +295,12 @@ def test_the_model_file_keeps_the_period_read_from_the_index(data, tmp_path):
     assert loaded[0].sampling_period == pytest.approx(PERIOD)
     np.testing.assert_allclose(loaded.predict(X), pipe.predict(X), rtol=0, atol=1e-12)
     assert step.get_params()["sampling_period"] is None
+    # the FMU runs at the period the filter was made for, refusing another
+    from skhmmgmr.export import write_fmu
+
+    write_fmu(pipe, tmp_path / "driver.fmu", binary=False)
+    with pytest.raises(ValueError, match="not the period"):
+        write_fmu(pipe, tmp_path / "other.fmu", binary=False, sampling_period=2 * PERIOD)
 
 
 def test_a_target_of_other_rows_is_refused_naming_both_lengths(data):
