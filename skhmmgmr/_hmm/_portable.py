@@ -189,10 +189,13 @@ def estimator_to_dict(estimator, *, model_type=REGRESSOR_TYPE, output_names=None
     recording (``longest_recording_``) added to ``training``."""
     check_is_fitted(estimator)
     longest = getattr(estimator, "longest_recording_", None)
+    params = estimator.get_params()
+    if params.get("min_log_density") is None:  # written only when set: older readers refuse it
+        params.pop("min_log_density", None)
     return to_dict(
         estimator.model_,
         model_type=model_type,
-        estimator_params=estimator.get_params(),
+        estimator_params=params,
         fit_info={key: getattr(estimator, key + "_", None) for key in FIT_INFO_KEYS},
         output_names=output_names,
         training={"longest_recording": longest, **(training or {})},

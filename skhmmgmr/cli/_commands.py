@@ -548,7 +548,9 @@ def command_export_c(args):
     for suffix in (".h", ".c"):
         check_output(folder / f"{name}{suffix}", overwrite=args.overwrite, inputs=[args.model])
     try:
-        header, source = write_c(model, folder, name=name, dtype=args.dtype)
+        header, source = write_c(
+            model, folder, name=name, dtype=args.dtype, overwrite=args.overwrite
+        )
     except ValueError as exc:
         raise CommandError(f"{args.model}: {exc}") from exc
     _log(args, f"Wrote {header} and {source} ({args.dtype})")
