@@ -441,6 +441,23 @@ def test_the_user_guide_program_reads_a_recording_and_prints_the_estimates(
     assert run.stdout.splitlines()[3].endswith(",1")
 
 
+def test_the_user_guide_program_builds_against_the_float32_filter(protocol, tmp_path):
+    inputs = list(FEATURE_NAMES[:3])
+    model = _fit(HMMGMRRegressor(n_states=3, n_iter=10, random_state=0), protocol, inputs)
+    _, source = write_c(model, tmp_path, dtype="float32")
+    program = tmp_path / "estimate"
+    command = [CC, *FLOAT32_FLAGS, f"-I{tmp_path}", "-o", str(program), str(EXAMPLE), str(source)]
+    result = subprocess.run([*command, "-lm"], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    data = protocol[["recording", *inputs]]
+    text = data.to_csv(index=False, float_format="%.17g")
+    run = subprocess.run([str(program)], input=text, capture_output=True, text=True, check=True)
+    values = np.array([[float(v) for v in line.split(",")] for line in run.stdout.splitlines()[1:]])
+    expected = model.predict(data[inputs], groups=data["recording"])
+    _close(values[:, 0], expected, model.model_.standardization.output_scale, FLOAT32_RTOL)
+    assert not values[:, -1].any()
+
+
 def test_refused_at_export_time(protocol, tmp_path):
     inputs = list(FEATURE_NAMES[:2])
     with pytest.raises(NotFittedError, match="not fitted"):
