@@ -241,7 +241,7 @@ def test_help_shows_every_default(command):
     parser = _sub_parsers()[command]
     formatter = parser._get_formatter()
     for action in parser._actions:
-        if action.option_strings and action.dest != "help":
+        if action.option_strings and action.dest not in ("help", "version"):
             assert "(default: " in formatter._expand_help(action), action.option_strings
 
 

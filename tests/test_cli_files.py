@@ -1,6 +1,8 @@
-"""The command line's files: row order, recording ids, guarded outputs, the model format."""
+"""The command line's files: row order, recording ids, guarded outputs (checked before any
+work, named by their option, written through files no one can plant), the model format."""
 
 import json
+import os
 import pickle
 from pathlib import Path
 
@@ -9,6 +11,7 @@ import pandas as pd
 import pytest
 from test_cli import make_recordings
 
+from skhmmgmr import HMMGMRRegressor, __version__, portable
 from skhmmgmr.cli import main
 from skhmmgmr.cli._files import CommandError, read_data, write_output
 
@@ -244,3 +247,184 @@ def test_select_checks_its_output_folder_before_the_run(tmp_path, runs, capsys, 
     assert (folder / "thesis.tex").read_text() == "mine"
     assert main(["select", str(runs), *DATA, "--output", str(tmp_path), "--overwrite"]) == 2
     assert "would overwrite the input" in _error(capsys)
+
+
+# --- #51: options and outputs checked before any work, named in errors, written through files
+# no one can plant -------------------------------------------------------------------------
+
+
+@pytest.fixture
+def victim(tmp_path):
+    """A file outside the folders the commands write to."""
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    path = outside / "victim.txt"
+    path.write_text("mine")
+    return path
+
+
+def _parse_error(argv, capsys):
+    """The message of an option refused when parsed (argparse exits with code 2)."""
+    with pytest.raises(SystemExit) as refused:
+        main(argv)
+    assert refused.value.code == 2
+    return _error(capsys)
+
+
+# --- item 3: no output is written through a predictable name ----------------------------------
+
+
+def test_fit_and_predict_never_write_through_a_planted_link(tmp_path, runs, victim):
+    """#51: the outputs were written to ``.partial-<pid>-<name>`` opened plainly, so that a
+    link planted there overwrote a file outside the folder (and was then renamed over the
+    output)."""
+    work = tmp_path / "work"
+    work.mkdir()
+    names = ("model.json", "predicted.csv", "metrics.csv")
+    for name in names:
+        (work / f".partial-{os.getpid()}-{name}").symlink_to(victim)
+    model = work / "model.json"
+    assert main(["fit", str(runs), *DATA, *FIT, "--output", str(model)]) == 0
+    predict = ["predict", str(model), str(runs), "--recording", "run", "--time", "t", "--quiet"]
+    predict += ["--target", "torque", "--output", str(work / "predicted.csv")]
+    assert main([*predict, "--metrics", str(work / "metrics.csv")]) == 0
+    assert victim.read_text() == "mine"
+    for name in names:
+        assert (work / name).is_file() and not (work / name).is_symlink()
+    assert portable.load(model).n_features_in_ == 2
+    assert len(pd.read_csv(work / "predicted.csv")) == len(pd.read_csv(runs))
+    assert len(pd.read_csv(work / "metrics.csv")) == 6  # one row per recording
+
+
+def test_export_c_never_writes_through_a_planted_link(tmp_path, model, victim):
+    folder = tmp_path / "c"
+    folder.mkdir()
+    for suffix in (".h", ".c"):
+        (folder / f".torque{suffix}.partial").symlink_to(victim)
+    assert main(["--quiet", "export-c", str(model), str(folder), "--name", "torque"]) == 0
+    assert victim.read_text() == "mine"
+    for suffix in (".h", ".c"):
+        path = folder / f"torque{suffix}"
+        assert path.is_file() and not path.is_symlink()
+    assert "torque_update(" in (folder / "torque.h").read_text()
+
+
+def test_report_never_writes_its_page_through_a_planted_link(tmp_path, victim):
+    from skhmmgmr.cli._report import write_report
+
+    folder = tmp_path / "report"
+    table = pd.DataFrame({"model": ["final"], "rmse": [1.0]})
+    write_report(folder, tables={"test_summary": table}, figures={}, meta={"title": "run"})
+    (folder / ".index.html.partial").symlink_to(victim)
+    assert main(["report", str(folder), "--quiet"]) == 0
+    assert victim.read_text() == "mine"
+    page = folder / "index.html"
+    assert not page.is_symlink() and "<h1>run</h1>" in page.read_text()
+
+
+# --- item 9: the target, the time and the recording ids are never features -------------------
+
+
+@pytest.mark.parametrize(
+    "columns, message",
+    [
+        (["torque"], "'torque' is the target (--target)"),
+        (["t"], "'t' is the time column (--time), which is never an input"),
+        (["run"], "'run' is the recording-id column (--recording)"),
+        (["f1", "f1"], "--features names ['f1'] more than once"),
+    ],
+)
+def test_fit_refuses_features_that_cannot_be_inputs(tmp_path, runs, capsys, columns, message):
+    """#51: ``--features ... driver_torque`` fitted the target on itself, ``--features ...
+    time`` took the time column as an input."""
+    output = tmp_path / "m.json"
+    argv = ["fit", str(runs), *DATA, "--features", "f0", *columns, "--output", str(output)]
+    assert main(argv) == 2
+    assert message in _error(capsys)
+    assert not output.exists()
+
+
+# --- item 11: export-c checks every argument before it makes a folder -------------------------
+
+
+def test_export_c_refusing_a_name_leaves_no_folder_behind(tmp_path, model, capsys):
+    target = tmp_path / "new" / "nested" / "dir"
+    assert main(["export-c", str(model), str(target), "--name", "2fast"]) == 2
+    assert "--name: name must be a C identifier" in _error(capsys)
+    assert not (tmp_path / "new").exists()
+
+
+def test_export_c_refusing_a_model_leaves_no_folder_behind(tmp_path, capsys):
+    """A model the C filter cannot run (missing values marginalised) is refused by write_c;
+    the folders made for it are removed."""
+    data = make_recordings()
+    fitted = HMMGMRRegressor(n_states=2, missing_values="marginalize", random_state=0)
+    fitted.fit(data[["f0", "f1"]], data["torque"], groups=data["run"])
+    path = tmp_path / "marginal.json"
+    portable.save(fitted, path)
+    target = tmp_path / "new" / "nested"
+    assert main(["export-c", str(path), str(target)]) == 2
+    assert "missing_values" in _error(capsys)
+    assert not (tmp_path / "new").exists()
+
+
+# --- item 17: numbers refused when the options are parsed, by the estimator's rule ------------
+
+
+@pytest.mark.parametrize(
+    "option, value, message",
+    [
+        ("--output-smoothing", "1e300", "'output_smoothing' parameter of HMMGMRRegressor"),
+        ("--output-smoothing", "1e400", "'output_smoothing' parameter of HMMGMRRegressor"),
+        ("--output-smoothing", "1" + "0" * 400, "'output_smoothing' parameter of HMMGMRRegressor"),
+        ("--output-smoothing", "2e6", "'output_smoothing' parameter of HMMGMRRegressor"),
+        ("--sampling-period", "inf", "must be a finite number"),
+        ("--sampling-period", "nan", "must be a finite number"),
+        ("--sampling-period", "-0.05", "'sampling_period' parameter"),
+    ],
+)
+def test_fit_refuses_unusable_numbers_when_it_parses_them(
+    tmp_path, runs, capsys, option, value, message
+):
+    """#51: ``--output-smoothing 1e300`` was refused only after the whole fit, 10**400 with an
+    OverflowError; ``--sampling-period inf`` passed the option check and printed a traceback
+    after fitting."""
+    output = tmp_path / "m.json"
+    argv = ["fit", str(runs), *DATA, *FIT, "--pipeline", "torque", "--load-columns", "f1"]
+    err = _parse_error([*argv, option, value, "--output", str(output)], capsys)
+    assert f"argument {option}:" in err and message in err
+    assert not output.exists()
+
+
+# --- item 23: errors name the option; --version; one rule for export-c's files ---------------
+
+
+def test_an_existing_metrics_file_is_named_by_its_option(tmp_path, runs, model, capsys):
+    """#51: "--output X exists" was printed for the path of --metrics."""
+    metrics = tmp_path / "metrics.csv"
+    metrics.write_text("mine")
+    argv = ["predict", str(model), str(runs), "--recording", "run", "--time", "t"]
+    argv += ["--target", "torque", "--metrics", str(metrics)]
+    assert main(argv) == 2
+    err = _error(capsys)
+    assert f"--metrics {metrics} exists; pass --overwrite" in err and "--output" not in err
+    assert metrics.read_text() == "mine"
+
+
+def test_export_c_names_its_own_options(tmp_path, model, capsys):
+    """#51: export-c, which has no --output, said "--output X exists"."""
+    folder = tmp_path / "c"
+    assert main(["--quiet", "export-c", str(model), str(folder), "--name", "torque"]) == 0
+    header = (folder / "torque.h").read_text()
+    assert main(["export-c", str(model), str(folder), "--name", "torque", "--float32"]) == 2
+    err = _error(capsys)
+    assert f"--name torque: {folder / 'torque.h'} exists; pass --overwrite" in err
+    assert "--output" not in err
+    assert (folder / "torque.h").read_text() == header  # nothing replaced
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as shown:
+        main(["--version"])
+    assert shown.value.code == 0
+    assert capsys.readouterr().out.strip() == f"skhmmgmr {__version__}"

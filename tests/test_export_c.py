@@ -90,7 +90,8 @@ class Compiled:
     def run(self, X, recordings, std=True):
         """Estimates (n, n_outputs), std and return codes of the rows of ``X``."""
         real = np.float32 if self.real is ctypes.c_float else np.float64
-        X = np.ascontiguousarray(X, dtype=real)
+        with np.errstate(over="ignore"):  # beyond float's range: inf, held as non-finite
+            X = np.ascontiguousarray(X, dtype=real)
         n = X.shape[0]
         restart = np.r_[1, np.asarray(recordings)[1:] != np.asarray(recordings)[:-1]]
         restart = np.ascontiguousarray(restart, dtype=np.intc)

@@ -291,3 +291,67 @@ def test_a_start_from_the_flat_model_gives_every_manoeuvre_a_state():
     ).fit(X, y, groups=groups, manoeuvre=labels)
     assert np.all(model.states_per_manoeuvre_ >= 1)
     assert model.states_per_manoeuvre_.sum() == 3
+
+
+# --- labels and manoeuvres refused naming the label, its row and its recording (#51) ----------
+
+
+def _recording_1_first():
+    """Two recordings, recording 1's rows first: fit reads them in the order of the ids, so
+    a row's place in X differs from its place in the fit."""
+    X, y, labels, groups = two_manoeuvres(n_recordings=2)
+    order = np.concatenate([np.flatnonzero(groups == 1), np.flatnonzero(groups == 0)])
+    return X[order], y[order], labels[order].astype(object), groups[order]
+
+
+@pytest.mark.parametrize("missing", [np.nan, None, ["keep"]])
+@pytest.mark.parametrize("manoeuvres", [None, ["keep", "change"]])
+def test_a_row_without_a_manoeuvre_label_is_refused_naming_it(missing, manoeuvres):
+    """#51: with manoeuvres=None a NaN label gave "manoeuvre 1.0 has 0 row(s)", None a
+    numpy TypeError."""
+    X, y, labels, groups = _recording_1_first()
+    labels[10] = missing
+    model = HierarchicalHMMGMRRegressor(manoeuvres=manoeuvres, n_states=1, n_iter=2)
+    with pytest.raises(ValueError, match=r"holds .* at row 10 of X \(recording 1\)") as error:
+        model.fit(X, y, groups=groups, manoeuvre=labels)
+    assert repr(missing) in str(error.value)
+
+
+def test_a_label_out_of_the_manoeuvres_is_named_with_its_first_row():
+    X, y, labels, groups = _recording_1_first()
+    labels[[200, 300]] = "overtake"  # recording 1, then recording 0
+    model = HierarchicalHMMGMRRegressor(manoeuvres=["keep", "change"], n_states=1, n_iter=2)
+    with pytest.raises(ValueError, match=r"\['overtake'\].*first is at row 300 of X \(recor"):
+        model.fit(X, y, groups=groups, manoeuvre=labels)  # the first in the fit's order
+
+
+@pytest.mark.parametrize("manoeuvres", [{"keep": 1, "change": 2}, {"keep", "change"}])
+def test_manoeuvres_given_as_a_dict_or_a_set_is_refused_naming_it(manoeuvres):
+    """#51: a dict gave "unhashable type: 'dict'", and from a model file "unknown
+    parameter"."""
+    X, y, labels, groups = two_manoeuvres(n_recordings=2)
+    model = HierarchicalHMMGMRRegressor(manoeuvres=manoeuvres, n_states=1, n_iter=2)
+    with pytest.raises(ValueError, match="'manoeuvres' parameter .* n_states, which takes a"):
+        model.fit(X, y, groups=groups, manoeuvre=labels)
+
+
+def test_a_model_file_with_manoeuvres_as_a_dict_names_the_key(fitted):
+    model = fitted[0]
+    data = model.to_dict()
+    data["estimator_params"]["manoeuvres"] = {"keep": 1, "change": 2}
+    with pytest.raises(ValueError, match="'estimator_params' .* 'manoeuvres' parameter") as error:
+        HierarchicalHMMGMRRegressor.from_dict(data)
+    assert "unknown parameter" not in str(error.value)
+
+
+def test_labels_of_texts_and_numbers_without_manoeuvres_are_refused():
+    X, y, labels, groups = two_manoeuvres(n_recordings=2)
+    labels = labels.astype(object)
+    labels[labels == "change"] = 1
+    model = HierarchicalHMMGMRRegressor(manoeuvres=None, n_states=1, n_iter=2)
+    with pytest.raises(ValueError, match=r"types \['int', 'str'\].*give manoeuvres="):
+        model.fit(X, y, groups=groups, manoeuvre=labels)
+    # named in the order of their blocks, they fit
+    named = HierarchicalHMMGMRRegressor(manoeuvres=["keep", 1], n_states=1, n_iter=2)
+    named.fit(X, y, groups=groups, manoeuvre=labels)
+    assert list(named.manoeuvres_) == ["keep", 1]

@@ -1,4 +1,4 @@
-"""Files written by skhmmgmr 0.1.0 still load: portable JSON bit for bit, pickles and skops too.
+"""Files written by skhmmgmr 0.1.0 still load: portable JSON to the last bits, pickles, skops.
 
 The fixtures in ``tests/fixtures/`` were written by 0.1.0 (``make_legacy_fixtures.py``), before
 the package moved from one flat folder into subpackages: portable model files, the predictions
@@ -27,16 +27,15 @@ def expected():
 
 
 def assert_same(actual, expected, key):
-    """``actual`` equals ``expected[key]``: bit for bit on the numpy that computed it.
+    """``actual`` equals ``expected[key]`` to the last bits of double precision.
 
-    The code path is the same on every stack, but another numpy (with its own OpenBLAS, such as
-    the oldest supported one, 1.24.1) rounds sums and products differently: 1e-15 apart, so
-    there the check is to 1e-12.
+    The code path is the same on every stack, but not the rounding: numpy chooses its SIMD loops
+    by the processor it runs on (AVX2, AVX-512...) and another numpy brings its own OpenBLAS
+    (the oldest supported one, 1.24.1, among them), and each sums and multiplies in its own
+    order. The differences are 1e-16 to 1e-15 on values of order one, so the check is to 1e-14:
+    a change of the model or of the read-out moves the estimates by orders of magnitude more.
     """
-    if np.__version__ == str(expected["numpy_version"]):
-        assert np.array_equal(actual, expected[key])
-    else:
-        np.testing.assert_allclose(actual, expected[key], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(actual, expected[key], rtol=0, atol=1e-14)
 
 
 def _inputs(expected, case):
@@ -44,7 +43,7 @@ def _inputs(expected, case):
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_a_0_1_0_json_file_predicts_bit_for_bit(expected, case):
+def test_a_0_1_0_json_file_predicts_to_the_last_bits(expected, case):
     model = HMMGMRRegressor.from_json(FIXTURES / f"legacy_0_1_0_{case}.json")
     X, groups = _inputs(expected, case), expected["groups"]
     mean, std = model.predict(X, groups=groups, return_std=True)
@@ -55,7 +54,7 @@ def test_a_0_1_0_json_file_predicts_bit_for_bit(expected, case):
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_a_0_1_0_json_file_streams_bit_for_bit(expected, case):
+def test_a_0_1_0_json_file_streams_to_the_last_bits(expected, case):
     model = HMMGMRRegressor.from_json(FIXTURES / f"legacy_0_1_0_{case}.json")
     X, groups = _inputs(expected, case), expected["groups"]
     first = X[groups == groups[0]]

@@ -37,6 +37,10 @@ ALLOWED_PRIVATE_ACCESS: set[tuple[str, str]] = {
     # an hmmlearn model or a FittedHMMGMR) and checks its parameters against the estimator
     # class's own constraints, as fit does: scikit-learn's convention for them is this name.
     ("_io.py", "_parameter_constraints"),
+    # The command line checks an option that sets a model's parameter (--output-smoothing,
+    # --sampling-period...) by that parameter's own constraint when it parses it, so that the
+    # command line and the API refuse the same values alike, with no rule restated.
+    ("_options.py", "_parameter_constraints"),
 }
 
 

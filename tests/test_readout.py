@@ -23,7 +23,7 @@ from skhmmgmr import (
     portable,
 )
 from skhmmgmr._core._panel import recordings_of
-from skhmmgmr._hmm._readout import roughness, smooth_outputs, weakest_decay
+from skhmmgmr._hmm._readout import fixed_decay, roughness, smooth_outputs, weakest_decay
 from skhmmgmr.datasets import FEATURE_NAMES, make_driving_protocol
 
 INPUTS = ["steering_wheel_angle", "yaw_rate", "lateral_acceleration"]
@@ -308,9 +308,21 @@ def test_bad_output_smoothing_is_refused_naming_it(data, bad):
         _fit(HMMGMRRegressor(n_states=2, output_smoothing=bad), data)
 
 
-def test_an_infinite_time_constant_is_refused_naming_it(data):
+@pytest.mark.parametrize("bad", [np.inf, 1e300, pytest.param(10**400, id="10**400"), 1e7])
+def test_an_unusable_time_constant_is_refused_before_the_fit(data, monkeypatch, bad):
+    """#51: 1e300 was refused only after the whole fit, 10**400 with an OverflowError; a
+    time constant beyond "auto"'s longest (1e6 rows) is refused as well, also by the rule the
+    cluster fit reads."""
+    import skhmmgmr.estimator._regressor
+
+    def never(*args, **kwargs):
+        raise AssertionError("the EM ran")
+
+    monkeypatch.setattr(skhmmgmr.estimator._regressor, "fit_hmm", never)
+    with pytest.raises(InvalidParameterError, match="output_smoothing"):
+        _fit(HMMGMRRegressor(n_states=2, output_smoothing=bad), data)
     with pytest.raises(ValueError, match="output_smoothing"):
-        _fit(HMMGMRRegressor(n_states=2, output_smoothing=np.inf), data)
+        fixed_decay(bad)
 
 
 def test_a_model_refuses_decays_outside_zero_one(plain):

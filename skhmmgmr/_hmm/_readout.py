@@ -21,6 +21,10 @@ from scipy.signal import lfilter
 # The bisection of the decay stops when the bracket is this narrow; it is also the largest
 # decay considered (a time constant of about 1e6 rows).
 _DECAY_TOLERANCE = 1e-6
+#: The longest time constant [rows] a read-out may have: that of the largest decay "auto"
+#: considers, and about the longest whose decay single precision (the C export's float32)
+#: still tells from one (a float just below one is 6e-8 from it).
+MAX_TIME_CONSTANT = 1e6
 
 
 def decay_of(time_constant):
@@ -29,18 +33,19 @@ def decay_of(time_constant):
 
 
 def fixed_decay(output_smoothing):
-    """Decay of a fixed ``output_smoothing`` (None or a finite time constant >= 0 in rows);
-    ValueError naming the parameter for anything else ("auto" is chosen in ``fit``)."""
+    """Decay of a fixed ``output_smoothing`` (None or a time constant in rows in
+    ``[0, MAX_TIME_CONSTANT]``); ValueError naming the parameter for anything else ("auto" is
+    chosen in ``fit``)."""
     if output_smoothing is None:
         return 0.0
     if (
         isinstance(output_smoothing, bool)
         or not isinstance(output_smoothing, numbers.Real)
-        or not (math.isfinite(output_smoothing) and output_smoothing >= 0)
+        or not 0 <= output_smoothing <= MAX_TIME_CONSTANT  # NaN and ints beyond a float too
     ):
         raise ValueError(
-            "output_smoothing must be None, 'auto' or a finite time constant >= 0 (in rows); "
-            f"got {output_smoothing!r}"
+            "output_smoothing must be None, 'auto' or a time constant in rows in "
+            f"[0, {MAX_TIME_CONSTANT:g}]; got {output_smoothing!r}"
         )
     return decay_of(float(output_smoothing))
 

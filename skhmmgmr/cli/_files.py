@@ -6,10 +6,15 @@ naming the file); its rows put in the order of :func:`~skhmmgmr.datasets.load_re
 refused); and the model file (a regressor or a torque pipeline), read only as the portable JSON
 format, never unpickled.
 
-Outputs: checked before the run, so that a long run never ends in an error it could have
-reported at once (the folder exists and is writable, an input is never overwritten, a user's
-file or folder only with ``--overwrite``), then written beside the target and swapped in when
-complete, so that an interrupted run leaves the previous file as it was.
+Outputs: checked before the run by the package's one rule for output files
+(:func:`~skhmmgmr._core._files.check_output_paths`), so that a long run never ends in an error
+it could have reported at once (the folder exists and is writable, a user's file only with
+``--overwrite``), with two rules of the command line's own: an input is never overwritten,
+and a report folder replaces an earlier report freely. Every error names the option the path
+came from. Files are then written through a temporary file created exclusively beside the
+target and swapped in when complete
+(:func:`~skhmmgmr._core._files.write_atomically`), so that an interrupted run leaves the
+previous file as it was and a file or link planted beside the target is never followed.
 
 Splits: data without a usable split column are split by recording at random
 (:func:`assign_splits`).
@@ -19,10 +24,13 @@ import os
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
+from .._core._files import check_output_paths, write_atomically
 from .._core._schema import DRIVER, RECORDING, SPLIT, TIME
 from ..datasets._frame import tidy_frame, time_order
 from ..datasets._recordings import read_table
+from ._options import NO_TIME, log
 from ._report import check_replaceable
 
 
@@ -45,10 +53,6 @@ def check_columns(frame, columns, path):
     missing = [c for c in columns if c not in frame.columns]
     if missing:
         raise CommandError(f"{path}: missing column(s) {missing}; available: {list(frame.columns)}")
-
-
-# The --time value of fit and predict that takes the rows in file order (no time column).
-NO_TIME = "none"
 
 
 def check_time_column(frame, time, path, *, file_order):
@@ -89,6 +93,27 @@ def in_time_order(frame, path, *, recording, time):
     return frame
 
 
+def ordered_data(args):
+    """The data of ``fit``/``predict``, rows gathered by recording and sorted by time (in file
+    order with ``--time none``)."""
+    frame = read_data(args.data, args.recording)
+    check_columns(frame, [args.recording], args.data)
+    check_time_column(frame, args.time, args.data, file_order=True)
+    time = None if args.time == NO_TIME else args.time
+    if time is None:
+        log(args, f"--time {NO_TIME}: the rows of {args.data} are taken in file order")
+    return in_time_order(frame, args.data, recording=args.recording, time=time)
+
+
+def model_inputs(frame, features, args):
+    """The feature columns, indexed by the time column when there is one: a velocity filter
+    checks its sampling period against it in every recording."""
+    X = frame[features]
+    if args.time == NO_TIME:
+        return X
+    return X.set_axis(pd.Index(frame[args.time].to_numpy(dtype=float), name=TIME))
+
+
 def load_model(path, *, return_training=False):
     """The model saved by ``skhmmgmr fit`` (:func:`skhmmgmr.portable.load`: a regressor or a
     torque pipeline), the portable JSON format only; with ``return_training``, also the
@@ -122,59 +147,61 @@ def _holds(output, source):
     return output.exists() and source.exists() and os.path.samefile(output, source)
 
 
-def check_output(path, *, overwrite, inputs=(), report=False):
-    """Refuse, before the run, an output that cannot be written or must not be replaced.
+def check_output(paths, *, option, overwrite, inputs=(), report=False, create_folders=False):
+    """Refuse, before the run, outputs that cannot be written or must not be replaced.
 
     Parameters
     ----------
-    path : str or path-like
-        The ``--output`` of the command.
+    paths : path-like or sequence of path-like
+        The files (or the report folder) the option names.
+    option : str
+        The option the paths come from (``--output``, ``--metrics``...), named in every
+        error.
     overwrite : bool
         ``--overwrite``: replace an existing file (or a folder that is not a report).
     inputs : iterable of str or path-like
         Files and folders the command reads: never overwritten, even with ``overwrite``.
     report : bool, default=False
         Whether the output is a report folder, which replaces an earlier report freely.
+    create_folders : bool, default=False
+        Whether a missing folder is made (else refused).
     """
-    path = Path(path)
-    parent = path.parent
-    if not parent.is_dir():
-        problem = "does not exist" if not parent.exists() else "is not a folder"
-        raise CommandError(f"--output {path}: the folder {parent} {problem}")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise CommandError(f"--output {path}: the folder {parent} is not writable")
-    for source in inputs:
-        if _holds(path, source):
-            raise CommandError(
-                f"--output {path} would overwrite the input {source}; choose another output "
-                "(--overwrite never replaces an input)"
-            )
-    if report:
-        try:
+    paths = [Path(paths)] if isinstance(paths, str | os.PathLike) else list(map(Path, paths))
+    for path in paths:
+        for source in inputs:
+            if _holds(path, source):
+                raise CommandError(
+                    f"{option} {path} would overwrite the input {source}; choose another "
+                    "output (--overwrite never replaces an input)"
+                )
+    try:
+        if report:
+            (path,) = paths
+            if not path.is_dir():  # the folder it goes in is checked as a file's
+                check_output_paths(paths, overwrite=True, option=option, create_folders=False)
+            elif not os.access(path.parent, os.W_OK | os.X_OK):
+                raise PermissionError(f"{path}: the folder {path.parent} is not writable")
             check_replaceable(path, overwrite=overwrite)
-        except (ValueError, OSError) as exc:
-            raise CommandError(f"--output {exc}") from exc
-    elif path.is_dir():
-        raise CommandError(f"--output {path} is a folder; name a file")
-    elif os.path.lexists(path) and not overwrite:
-        raise CommandError(f"--output {path} exists; pass --overwrite to replace it")
+        else:
+            check_output_paths(
+                paths, overwrite=overwrite, option=option, create_folders=create_folders
+            )
+    except (ValueError, OSError) as exc:
+        message = str(exc)
+        raise CommandError(
+            message if message.startswith(option) else f"{option} {message}"
+        ) from exc
 
 
 def write_output(path, write):
-    """Write ``path`` through ``write(partial_path)``, then swap the complete file in.
-
-    The partial file is beside ``path`` and ends with its name, so that pandas infers the
-    same compression; it is removed when the write fails or is interrupted.
-    """
-    path = Path(path)
-    partial = path.with_name(f".partial-{os.getpid()}-{path.name}")
+    """Write ``path`` through ``write(temporary_path)``
+    (:func:`~skhmmgmr._core._files.write_atomically`: a temporary file created exclusively
+    beside ``path``, ending with its name so that pandas infers the same format and
+    compression, swapped in when complete and removed when the write fails)."""
     try:
-        write(partial)
-        os.replace(partial, path)
+        write_atomically(path, write=write)
     except OSError as exc:
         raise CommandError(f"cannot write {path}: {exc.strerror or exc}") from exc
-    finally:
-        partial.unlink(missing_ok=True)
 
 
 def assign_splits(frame, args):

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .._core._files import write_atomically
 from .._version import __version__
 
 MANIFEST = "manifest.json"
@@ -418,14 +419,7 @@ def render_html(output):
         text = ", ".join(f"{k} {v}" for k, v in versions_found.items())
         parts.append(f"<h2>Versions</h2><p>{html.escape(text)}</p>")
     parts.append("</body></html>")
-    page = output / PAGE
-    partial = output / f".{PAGE}.partial"
-    try:
-        partial.write_text("\n".join(parts), encoding="utf-8")
-        os.replace(partial, page)
-    finally:
-        partial.unlink(missing_ok=True)
-    return page
+    return write_atomically(output / PAGE, "\n".join(parts))
 
 
 def _section(output, entry, *, level):

@@ -7,37 +7,21 @@ model as they read any other.
 """
 
 import warnings
-from collections.abc import Mapping
-from numbers import Integral
+from collections.abc import Mapping, Set
+from numbers import Integral, Number
 
 import numpy as np
-from sklearn.cluster import KMeans
 from sklearn.exceptions import ConvergenceWarning
-from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
-from .._core._compat import Interval, StrOptions, _fit_context
+from .._core._compat import Interval, InvalidParameterError, StrOptions, _fit_context
 from .._core._panel import read_layout
-from .._core._sequences import Recordings
-from .._hmm._em import (
-    EMResult,
-    HMMParameters,
-    e_step,
-    fit_hmm,
-    score_hmm,
-    state_posteriors,
-)
-from .._hmm._em_data import Columns, EStepData
-from .._hmm._emissions import GaussianEmissions, emission_family
-from .._hmm._hierarchy import Hierarchy, HierarchyParts
+from .._hmm._emissions import emission_family
+from .._hmm._hierarchy import Hierarchy
+from .._hmm._hierarchy_em import HierarchyEM
 from .._hmm._portable import HIERARCHICAL_TYPE
 from ._prediction_inputs import read_joint_inputs
 from ._regressor import HMMGMRRegressor
-
-# Pseudo-count added to every count of the label sequence (manoeuvre starts, exits, chain
-# transitions): a manoeuvre change the labels never show keeps a small probability, which the
-# joint refinement can raise.
-PSEUDO_COUNT = 0.5
 
 
 class HierarchicalHMMGMRRegressor(HMMGMRRegressor):
@@ -104,7 +88,7 @@ class HierarchicalHMMGMRRegressor(HMMGMRRegressor):
         Regularisation of the state covariances (see :class:`HMMGMRRegressor`).
     missing_values : {"error", "marginalize", "carry_forward"}, default="error"
         What a NaN means (see :class:`HMMGMRRegressor`).
-    output_smoothing : None, float >= 0 or "auto", default=None
+    output_smoothing : None, float in [0, 1e6] or "auto", default=None
         Causal first-order read-out of the estimate (see :class:`HMMGMRRegressor`).
     min_log_density : float or None, default=None
         The outlier policy: which samples the filter holds (see :class:`HMMGMRRegressor`).
@@ -253,23 +237,26 @@ output_smoothing_
         self : HierarchicalHMMGMRRegressor
         """
         emission_family(self.covariance_type)
-        labels = None
-        if manoeuvre is not None:
-            labels = np.asarray(manoeuvre, dtype=object).ravel()
-            if labels.shape[0] != _n_rows(X):
-                raise ValueError(
-                    f"manoeuvre has {labels.shape[0]} labels, X has {_n_rows(X)} rows: give "
-                    "one manoeuvre label per row"
-                )
+        labels = None if manoeuvre is None else _Labels.read(manoeuvre, X, groups, time)
         names = _manoeuvre_names(self.manoeuvres, labels)
         sizes = _states_per_manoeuvre(self.n_states, names)
-        codes = None if labels is None else _codes(labels, names, X, groups, time)
+        codes = None if labels is None else labels.codes(names)
         inputs = read_joint_inputs(self, X, y, groups, time, fitting=True)
+        standardized, scaling, stale_noise = self._standardized(inputs, sum(sizes))
+        settings = HierarchyEM(
+            start=self.start,
+            refine_iter=self.refine_iter,
+            n_iter=self.n_iter,
+            tol=self.tol,
+            n_init=self.n_init,
+            init_params=self.init_params,
+            reg_covar=self.reg_covar,
+            covariance_type=self.covariance_type,
+        )
+        result, sizes = settings.fit(
+            standardized, inputs.recordings, codes, names, sizes, self.random_state
+        )
         self._set_structure(names, sizes)
-        hierarchy = self._hierarchy()
-        standardized, scaling, stale_noise = self._standardized(inputs, hierarchy.n_states)
-        recordings = inputs.recordings
-        result = self._fit_hierarchy(standardized, recordings, codes, hierarchy)
         # with labels, refine_iter is a budget of refinement, not a fit to convergence
         if not result.converged and codes is None:
             warnings.warn(
@@ -280,164 +267,6 @@ output_smoothing_
             )
         self._set_fitted(result, inputs, scaling, stale_noise)
         return self
-
-    def _fit_hierarchy(self, columns, recordings, codes, hierarchy):
-        """The EM result of the flat hierarchical HMM on the standardised ``columns`` (with
-        ``start="flat"``, the structure is set again to the sizes the flat model gave)."""
-        rng = check_random_state(self.random_state)
-        if codes is not None:
-            start, hierarchy = self._start(columns, recordings, codes, hierarchy, rng)
-            return self._joint_em(columns, recordings, start, hierarchy, self.refine_iter)
-        best = None
-        for _ in range(self.n_init):
-            codes = self._kmeans_codes(columns, hierarchy.n_manoeuvres, rng)
-            start, found = self._start(columns, recordings, codes, hierarchy, rng)
-            result = self._joint_em(columns, recordings, start, found, self.n_iter)
-            if best is None or result.objective > best.objective:
-                best, sizes = result, found.sizes
-        self._set_structure(list(self.manoeuvres_), sizes)
-        return best
-
-    def _start(self, columns, recordings, codes, hierarchy, rng):
-        """``(parameters, hierarchy)`` the joint EM starts from (see ``start``)."""
-        if self.start == "labels":
-            return self._labelled_start(columns, recordings, codes, hierarchy, rng), hierarchy
-        parameters, sizes = self._flat_start(columns, recordings, codes, hierarchy, rng)
-        self._set_structure(list(self.manoeuvres_), sizes)
-        return parameters, self._hierarchy()
-
-    def _flat_start(self, columns, recordings, codes, hierarchy, rng):
-        """The flat HMM of as many states, every state given to the manoeuvre whose rows hold
-        most of its posterior probability (every manoeuvre at least one state, taken from
-        the manoeuvre with the most states where it has the largest share), the states
-        ordered by manoeuvre and the transitions of the hierarchy estimated from them (one
-        M-step of the parts). Returns ``(parameters, sizes)``."""
-        n_manoeuvres, total = hierarchy.n_manoeuvres, hierarchy.n_states
-        flat = self._fit_states(columns, recordings, total, rng).parameters
-        posteriors = state_posteriors(_copy(columns), recordings, flat)
-        mass = np.zeros((n_manoeuvres, total))
-        np.add.at(mass, codes, posteriors)
-        owner = mass.argmax(axis=0)
-        for m in range(n_manoeuvres):
-            if np.any(owner == m):
-                continue
-            counts = np.bincount(owner, minlength=n_manoeuvres)
-            free = np.flatnonzero(counts[owner] > 1)
-            share = mass[m, free] / np.maximum(mass[:, free].sum(axis=0), np.finfo(float).tiny)
-            owner[free[np.argmax(share)]] = m
-        order = np.argsort(owner, kind="stable")
-        sizes = np.bincount(owner, minlength=n_manoeuvres)
-        permuted = HMMParameters(
-            flat.startprob[order],
-            flat.transmat[np.ix_(order, order)],
-            flat.emissions.reordered(order),
-        )
-        structure = Hierarchy(sizes)
-        stats = e_step(EStepData(_copy(columns), recordings, total), permuted)
-        startprob, transmat = structure.maximize(
-            stats.start_counts, stats.transition_counts, permuted
-        )
-        return HMMParameters(startprob, transmat, permuted.emissions), sizes
-
-    def _fit_states(self, columns, recordings, n_states, rng):
-        """An unstructured HMM of ``n_states`` on ``columns``, with the estimator's EM
-        settings (the :class:`EMResult`)."""
-        return fit_hmm(
-            columns,
-            recordings,
-            n_states,
-            n_init=self.n_init,
-            init_params=self.init_params,
-            n_iter=self.n_iter,
-            tol=self.tol,
-            reg_covar=self.reg_covar,
-            random_state=rng,
-            covariance_type=self.covariance_type,
-        )
-
-    def _joint_em(self, columns, recordings, start, hierarchy, n_iter):
-        if n_iter == 0:
-            prior = type(start.emissions).prior_for(
-                self.reg_covar, columns.n_samples, hierarchy.n_states
-            )
-            log_likelihood = score_hmm(
-                Columns(columns.values.copy(), columns.shift), recordings, start
-            )
-            objective = log_likelihood + start.emissions.log_prior(prior)
-            return EMResult(start, log_likelihood, [log_likelihood], 0, True, objective)
-        return fit_hmm(
-            columns,
-            recordings,
-            hierarchy.n_states,
-            n_iter=n_iter,
-            tol=self.tol,
-            reg_covar=self.reg_covar,
-            initial_parameters=start,
-            covariance_type=self.covariance_type,
-            transitions=hierarchy,
-        )
-
-    @staticmethod
-    def _kmeans_codes(columns, n_manoeuvres, rng):
-        """A manoeuvre per row by k-means on the standardised rows (missing values at their
-        column's mean)."""
-        if n_manoeuvres == 1:
-            return np.zeros(columns.n_samples, dtype=np.intp)
-        rows = np.nan_to_num(columns.rows())
-        kmeans = KMeans(n_manoeuvres, n_init=1, random_state=rng.randint(2**31 - 1))
-        return kmeans.fit_predict(rows).astype(np.intp)
-
-    def _labelled_start(self, columns, recordings, codes, hierarchy, rng):
-        """The flat HMM read from the labels: every manoeuvre's HMM fitted on its segments,
-        the chain, exits and starts counted on the label sequence."""
-        segments = _segments(codes, recordings)
-        names = self.manoeuvres_
-        n_manoeuvres = hierarchy.n_manoeuvres
-        starts, stops, seg_codes, follows = segments
-        blocks, weights = [], []
-        within = np.zeros((hierarchy.n_states, hierarchy.n_states))
-        entry = np.empty(hierarchy.n_states)
-        exit = np.zeros(hierarchy.n_states)
-        for m in range(n_manoeuvres):
-            mine = np.flatnonzero(seg_codes == m)
-            lengths = stops[mine] - starts[mine]
-            n_rows, size = int(lengths.sum()), hierarchy.sizes[m]
-            if n_rows < size:
-                raise ValueError(
-                    f"manoeuvre {names[m]!r} has {n_rows} row(s), fewer than its {size} "
-                    "state(s): every state needs at least one row (label more rows of it, or "
-                    "give it fewer states in n_states)"
-                )
-            rows = np.flatnonzero(codes == m)  # its segments, in order
-            bounds = np.concatenate([[0], np.cumsum(lengths)])
-            block = Recordings(ids=np.arange(len(mine)), starts=bounds[:-1], stops=bounds[1:])
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ConvergenceWarning)
-                rows_of_m = Columns(columns.values[:, rows], columns.shift)
-                result = self._fit_states(rows_of_m, block, size, rng)
-            params = result.parameters
-            span = hierarchy.block(m)
-            within[span, span] = params.transmat
-            entry[span] = params.startprob
-            # leaving: the segments followed by another manoeuvre in their recording
-            exit[span] = (np.sum(follows[mine] >= 0) + PSEUDO_COUNT) / (n_rows + 1.0)
-            blocks.append(params.emissions)
-            weights.append(n_rows)
-        chain = np.full((n_manoeuvres, n_manoeuvres), PSEUDO_COUNT)
-        changes = follows >= 0
-        np.add.at(chain, (seg_codes[changes], follows[changes]), 1.0)
-        np.fill_diagonal(chain, 0.0)
-        if n_manoeuvres == 1:
-            exit[:] = 0.0
-        else:
-            chain /= chain.sum(axis=1, keepdims=True)
-        first = np.full(n_manoeuvres, PSEUDO_COUNT)
-        np.add.at(first, codes[recordings.starts], 1.0)
-        first /= first.sum()
-        startprob = first[hierarchy.state_manoeuvre] * entry
-        transmat = hierarchy.compose(HierarchyParts(within, exit, chain, entry))
-        emissions = GaussianEmissions.stacked(blocks, weights)
-        return HMMParameters(startprob / startprob.sum(), transmat, emissions)
 
     def fit_transform(self, X, y, groups=None, time=None, manoeuvre=None):
         """Fit, then return the filtered state probabilities of the training recordings."""
@@ -546,19 +375,32 @@ output_smoothing_
 
 
 def _manoeuvre_names(manoeuvres, labels=None):
-    """The manoeuvres' names from the parameter ``manoeuvres`` (or, for None, the labels)."""
+    """The manoeuvres' names from the parameter ``manoeuvres`` (or, for None, the
+    :class:`_Labels` of fit)."""
     if manoeuvres is None:
         if labels is None:
             raise ValueError(
                 "manoeuvres=None takes the manoeuvres from the labels: pass "
                 "manoeuvre=<label per row> to fit, or give manoeuvres (a number or names)"
             )
-        return [_plain(name) for name in np.unique(labels)]
+        return labels.names()
     if isinstance(manoeuvres, Integral):
         return list(range(int(manoeuvres)))
+    if isinstance(manoeuvres, Mapping | Set):
+        raise InvalidParameterError(
+            "The 'manoeuvres' parameter of HierarchicalHMMGMRRegressor must be a number of "
+            f"manoeuvres, a list of their names in the order of their blocks, or None; got the "
+            f"{type(manoeuvres).__name__} {manoeuvres!r} (the states per manoeuvre go in "
+            "n_states, which takes a dict)"
+        )
     names = [_plain(name) for name in np.asarray(manoeuvres, dtype=object).ravel()]
     if not names:
         raise ValueError("manoeuvres is an empty list; give at least one manoeuvre")
+    for name in names:
+        if not _is_label(name):
+            raise ValueError(
+                f"manoeuvres holds {name!r}: every manoeuvre's name must be a text or a number"
+            )
     if len(set(names)) != len(names):
         twice = sorted({str(n) for n in names if names.count(n) > 1})
         raise ValueError(f"manoeuvres names {twice} more than once")
@@ -607,39 +449,70 @@ def _plain(value):
     return value.item() if isinstance(value, np.generic) else value
 
 
-def _codes(labels, names, X, groups, time):
-    """The manoeuvre index of every row, in the filter order of fit; unknown labels
-    refused."""
-    labels = read_layout(X, groups, time, canonical=True).to_filter_order(labels)
-    index = {name: i for i, name in enumerate(names)}
-    unknown = sorted({str(label) for label in labels if _plain(label) not in index})
-    if unknown:
-        raise ValueError(f"manoeuvre holds the label(s) {unknown}, not among manoeuvres={names}")
-    return np.fromiter((index[_plain(v)] for v in labels), dtype=np.intp, count=len(labels))
+def _is_label(value):
+    """Whether ``value`` may name a manoeuvre: a text or a number, not missing (None, NaN)."""
+    return isinstance(value, str | Number) and value == value
 
 
-def _copy(columns):
-    """Columns the engine may change in place (it zeroes missing values)."""
-    return Columns(columns.values.copy(), columns.shift)
+class _Labels:
+    """The manoeuvre label of every row, in the filter order of fit, and where every row came
+    from (its row in ``X`` and its recording), to name them in errors."""
+
+    def __init__(self, labels, rows, recordings):
+        self.labels, self.rows, self.recordings = labels, rows, recordings
+
+    @classmethod
+    def read(cls, manoeuvre, X, groups, time):
+        labels = np.asarray(manoeuvre, dtype=object).ravel()
+        n_rows = _n_rows(X)
+        if labels.shape[0] != n_rows:
+            raise ValueError(
+                f"manoeuvre has {labels.shape[0]} labels, X has {n_rows} rows: give one "
+                "manoeuvre label per row"
+            )
+        layout = read_layout(X, groups, time, canonical=True)
+        rows = np.arange(n_rows) if layout.order is None else np.asarray(layout.order)
+        read = cls(layout.to_filter_order(labels), rows, layout.groups)
+        plain = [_plain(label) for label in read.labels]
+        bad = next((i for i, label in enumerate(plain) if not _is_label(label)), None)
+        if bad is not None:
+            raise ValueError(
+                f"manoeuvre holds {plain[bad]!r} at {read.where(bad)}: every row needs the "
+                "name (a text or a number) of its manoeuvre"
+            )
+        read.labels = plain
+        return read
+
+    def where(self, i):
+        """Row ``i`` (filter order) named by its row in ``X`` and its recording."""
+        row = f"row {self.rows[i]} of X"
+        if self.recordings is None:
+            return row
+        return f"{row} (recording {_plain(self.recordings[i])!r})"
+
+    def names(self):
+        """The distinct labels, sorted (``manoeuvres=None``)."""
+        try:
+            return [_plain(name) for name in np.unique(np.asarray(self.labels, dtype=object))]
+        except TypeError:  # texts and numbers do not sort together
+            kinds = sorted({type(label).__name__ for label in self.labels})
+            raise ValueError(
+                f"manoeuvre mixes labels of the types {kinds}, which have no order: give "
+                "manoeuvres=[...] to name the manoeuvres in the order of their blocks"
+            ) from None
+
+    def codes(self, names):
+        """The manoeuvre index of every row; a label not among ``names`` refused."""
+        index = {name: i for i, name in enumerate(names)}
+        unknown = sorted({str(label) for label in self.labels if label not in index})
+        if unknown:
+            first = next(i for i, label in enumerate(self.labels) if label not in index)
+            raise ValueError(
+                f"manoeuvre holds the label(s) {unknown}, not among manoeuvres={names}; the "
+                f"first is at {self.where(first)}"
+            )
+        return np.fromiter((index[v] for v in self.labels), dtype=np.intp, count=len(self.labels))
 
 
 def _n_rows(X):
     return X.shape[0] if hasattr(X, "shape") else len(X)
-
-
-def _segments(codes, recordings):
-    """``(starts, stops, codes, follows)`` of the runs of one manoeuvre within every
-    recording; ``follows`` is the manoeuvre of the next run in the same recording, or -1."""
-    n_samples = codes.shape[0]
-    breaks = np.zeros(n_samples, dtype=bool)
-    breaks[np.asarray(recordings.starts, dtype=int)] = True
-    breaks[1:] |= codes[1:] != codes[:-1]
-    starts = np.flatnonzero(breaks)
-    stops = np.append(starts[1:], n_samples)
-    seg_codes = codes[starts]
-    follows = np.full(starts.shape[0], -1, dtype=np.intp)
-    recording_start = np.zeros(n_samples, dtype=bool)
-    recording_start[np.asarray(recordings.starts, dtype=int)] = True
-    same_recording = np.append(~recording_start[stops[:-1]], False)
-    follows[same_recording] = seg_codes[1:][same_recording[:-1]]
-    return starts, stops, seg_codes, follows

@@ -10,7 +10,7 @@ from sklearn.metrics import r2_score
 from sklearn.utils import metadata_routing
 from sklearn.utils.validation import check_is_fitted
 
-from .._core._compat import Interval, StrOptions, _fit_context
+from .._core._compat import FiniteInterval, Interval, StrOptions, _fit_context
 from .._core._panel import align_target
 from .._core._validation import (
     check_column_scales,
@@ -25,7 +25,12 @@ from .._hmm._fitted import FittedHMMGMR, Standardization
 from .._hmm._gmr import filter_state_probabilities, read_missing, scaled_input_densities
 from .._hmm._holds import MIN_LOG_DENSITY_CONSTRAINT
 from .._hmm._missing import observed_counts
-from .._hmm._readout import fixed_decay, time_constant_of, weakest_decay
+from .._hmm._readout import (
+    MAX_TIME_CONSTANT,
+    fixed_decay,
+    time_constant_of,
+    weakest_decay,
+)
 from .._hmm._stale_inputs import MISSING_VALUES, learn_stale_noise, stale_noise_for
 from ._adaptation import AdaptMixin
 from ._io import ModelIOMixin
@@ -89,7 +94,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         value in the recording, as a noisy observation whose variance is the variogram at its
         age (marginalised when there is none, or older than 128 samples). Infinities are
         refused either way. See the user guide, "Missing inputs".
-    output_smoothing : None, float >= 0 or "auto", default=None
+    output_smoothing : None, float in [0, 1e6] or "auto", default=None
         Time constant ``tau``, in rows, of a causal first-order read-out of the GMR estimate:
         ``estimate_t = a estimate_{t-1} + (1 - a) GMR_t`` with ``a = exp(-1 / tau)``,
         restarted at every recording (the first estimate is the GMR one). The same read-out
@@ -97,9 +102,10 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         ``fit`` chooses, per output, the weakest read-out whose estimate of the training
         recordings is no rougher than the measured output there (the thesis' smoothness,
         :func:`~skhmmgmr.metrics.smoothness_score`); none when the GMR estimate already is
-        not. None or 0: the GMR estimate itself (the thesis' model). ``return_std`` gives
-        the model's predictive standard deviation either way. See the user guide, "Smooth
-        by design".
+        not. None or 0: the GMR estimate itself (the thesis' model). At most 1e6 rows, the
+        longest "auto" considers (single precision, as in the C export's float32, could not
+        tell a longer one's decay from one). ``return_std`` gives the model's predictive
+        standard deviation either way. See the user guide, "Smooth by design".
     min_log_density : float or None, default=None
         The outlier policy, the same in ``predict``, :class:`~skhmmgmr.FilterStream` and the
         generated C code (:func:`skhmmgmr.export.write_c`). None: no sample is held; the
@@ -109,7 +115,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         its std and the state probabilities stay those of the last accepted sample of the
         recording (the prior mixture's before any), and the filter goes on as if the sample
         had not come. The training rows' own log-densities tell what is usual
-        (:meth:`log_density_of_inputs`). Read at prediction time: ``set_params`` on a fitted
+        (:meth:`input_log_density`). Read at prediction time: ``set_params`` on a fitted
         model takes effect without a refit. Inputs whose standardised absolute values sum
         to 1e100 or more are out of the model's range either way: ``predict`` refuses them,
         the stream and the C code hold them. See the user guide, "Held samples".
@@ -206,7 +212,11 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         "init_params": [StrOptions(set(INIT_METHODS))],
         "reg_covar": [Interval(Real, 0, None, closed="left")],
         "missing_values": [StrOptions(set(MISSING_VALUES))],
-        "output_smoothing": [None, Interval(Real, 0, None, closed="left"), StrOptions({"auto"})],
+        "output_smoothing": [
+            None,
+            FiniteInterval(Real, 0, MAX_TIME_CONSTANT, closed="both"),
+            StrOptions({"auto"}),
+        ],
         "min_log_density": MIN_LOG_DENSITY_CONSTRAINT,
         "random_state": ["random_state"],
         "verbose": ["verbose"],
