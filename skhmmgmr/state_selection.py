@@ -27,6 +27,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from ._core._compat import Interval, _fit_context
 from ._core._docstrings import fill_shared_parameters
+from ._core._pickled import PickleVersionMixin
 from ._search._evaluation import evaluate_models
 from ._search._score_tables import labels_of, relative_gain, rescore_table
 from ._search.base import RecordingSearchMixin, default_estimator
@@ -100,7 +101,7 @@ def state_choices(scores, *, tol=0.01, score="performance_score"):
 
 
 @fill_shared_parameters
-class StateSelector(RecordingSearchMixin, RegressorMixin, BaseEstimator):
+class StateSelector(PickleVersionMixin, RecordingSearchMixin, RegressorMixin, BaseEstimator):
     """Choose the number of states K by the thesis' 1% rule on validation recordings.
 
     Fits a clone of ``estimator`` for every K in ``k_min..k_max`` on the training recordings of

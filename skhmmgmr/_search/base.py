@@ -17,6 +17,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._core._compat import HasMethods, Interval
 from .._core._panel import align_target, read_layout, recordings_of
+from .._core._pickled import PickleVersionMixin
 from .._core._validation import check_finite, check_target_finite, column_names_of
 from ..estimator import HMMGMRRegressor
 from ._evaluation import check_recording_splits, evaluate_models, shared_evaluation_store
@@ -174,5 +175,5 @@ def read_search_inputs(selector, X, y, groups, *, min_samples=1):
     return X, y, groups
 
 
-class RecordingSelector(RecordingSearchMixin, SelectorMixin, BaseEstimator):
+class RecordingSelector(PickleVersionMixin, RecordingSearchMixin, SelectorMixin, BaseEstimator):
     """Feature selector over recordings (fit on training, judge on validation recordings)."""

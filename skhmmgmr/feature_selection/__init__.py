@@ -1,6 +1,5 @@
 """Feature selection of the thesis: the Spearman filter and the exhaustive and forward wrappers."""
 
-from .._core._public import publish
 from ._spearman import SpearmanSelector, spearman_relevance
 from ._wrappers import ExhaustiveFeatureSelector, ForwardFeatureSelector
 
@@ -10,5 +9,3 @@ __all__ = [
     "SpearmanSelector",
     "spearman_relevance",
 ]
-
-publish(globals())

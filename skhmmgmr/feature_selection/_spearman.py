@@ -16,6 +16,7 @@ from sklearn.utils.validation import check_is_fitted
 from .._core._compat import Interval, StrOptions, _fit_context
 from .._core._docstrings import fill_shared_parameters
 from .._core._panel import recordings_of
+from .._core._pickled import PickleVersionMixin
 from .._core._validation import check_dense, check_finite, check_target_finite
 from .._search.base import read_search_inputs
 
@@ -97,7 +98,7 @@ def spearman_relevance(X, y, *, groups=None):
     return scores, combined
 
 
-class SpearmanSelector(SelectorMixin, BaseEstimator):
+class SpearmanSelector(PickleVersionMixin, SelectorMixin, BaseEstimator):
     """Keep the ``k`` features with the strongest mean absolute Spearman correlation.
 
     The filter of the thesis (method 1): correlations are taken per recording and averaged (see

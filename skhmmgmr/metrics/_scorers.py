@@ -9,6 +9,7 @@ from sklearn.utils.metadata_routing import UNCHANGED, MetadataRequest, get_routi
 from .._core._compat import _MetadataRequester, _routing_enabled
 from .._core._docstrings import fill_shared_parameters
 from .._core._panel import read_layout, recordings_of
+from .._core._pickled import PickleVersionMixin
 from .._core._validation import check_sampling_period
 from ._table import (
     average,
@@ -23,7 +24,7 @@ class UngroupedScoringWarning(UserWarning):
     """A scorer received no ``groups`` and scored the whole fold as one recording."""
 
 
-class _RecordingScorer(_MetadataRequester):
+class _RecordingScorer(PickleVersionMixin, _MetadataRequester):
     """Base of the per-recording scorers: prediction per recording and metadata routing.
 
     Subclasses define ``_score_predictions(y_true, y_pred, groups, sampling_period, time)``.

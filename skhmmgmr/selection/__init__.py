@@ -1,6 +1,5 @@
 """The thesis' parameter selection framework: ``select_parameters`` and its building blocks."""
 
-from .._core._public import publish
 from .._search._score_tables import one_way_anova
 from ._candidates import candidate_subsets, compare_subsets, feature_relevance
 from ._framework import SelectionReport, select_parameters
@@ -15,5 +14,3 @@ __all__ = [
     "one_way_anova",
     "select_parameters",
 ]
-
-publish(globals())

@@ -29,6 +29,7 @@ from sklearn.model_selection import PredefinedSplit
 from threadpoolctl import threadpool_limits
 
 from .._core._docstrings import fill_shared_parameters
+from .._core._pickled import PickleVersionMixin
 from .._core._schema import TARGET
 from .._search._evaluation import shared_evaluations
 from .._search._score_tables import labels_of
@@ -55,7 +56,7 @@ from ._sources import (
 
 
 @dataclass
-class SelectionReport:
+class SelectionReport(PickleVersionMixin):
     """Everything :func:`select_parameters` found; every table is a pandas DataFrame.
 
     Attributes

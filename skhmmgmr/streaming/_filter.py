@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from .._core._pickled import PickleVersionMixin
 from .._hmm._holds import MAX_STANDARDISED
 from .._hmm._stale_inputs import carried_inputs
 from ._adaptation import OnlineMeans, check_adaptation
@@ -43,7 +44,7 @@ from ._source import read_streamed
 from ._targets import read_target, read_targets
 
 
-class FilterStream:
+class FilterStream(PickleVersionMixin):
     """Causal HMM-GMR filter of a fitted :class:`~skhmmgmr.HMMGMRRegressor`, one sample a call.
 
     Streaming a recording sample by sample gives the estimates of ``model.predict`` on the whole
@@ -249,7 +250,7 @@ class FilterStream:
 
     def __setstate__(self, state):
         """Unpickle, then link the buffer views again (pickling copies every view)."""
-        self.__dict__.update(state)
+        super().__setstate__(state)
         n_inputs, n_whitened = self._z.shape[0] - 1, self._squares.shape[0] - 1
         # a stream pickled before pipelines streamed reads the regressor's rows
         self.__dict__.setdefault("_stages", ())

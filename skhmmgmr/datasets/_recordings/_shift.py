@@ -3,7 +3,7 @@
 import numpy as np
 import pandas as pd
 
-from .._core._panel import read_layout
+from ..._core._panel import read_layout
 
 
 def shift_target(y, horizon_rows, groups=None):

@@ -28,8 +28,8 @@ import warnings
 import numpy as np
 import pandas as pd
 
-from .._core._schema import DRIVER, RECORDING, SETTING, SPLIT, TIME
-from ._frame import check_rate, check_times
+from ..._core._schema import CROSSING_TIME, DRIVER, MANOEUVRE, RECORDING, SETTING, SPLIT, TIME
+from .._frame import check_rate, check_times
 
 SEPARATOR = "/"
 # Bounds of the grid: a piece gets at most this many grid rows per sample (a 10 Hz log on a
@@ -37,7 +37,8 @@ SEPARATOR = "/"
 MAX_ROWS_PER_SAMPLE = 100
 MIN_GRID_ROWS = 10_000
 MAX_GRID_ROWS = 1_000_000_000
-_LABELS = (DRIVER, SETTING, SPLIT)  # meta columns held whatever their dtype
+# meta columns held whatever their dtype (a simulated frame's labels among them)
+_LABELS = (DRIVER, SETTING, SPLIT, MANOEUVRE, CROSSING_TIME)
 
 
 def check_max_gap(max_gap, sampling_rate):

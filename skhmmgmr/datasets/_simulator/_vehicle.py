@@ -1,8 +1,10 @@
 """Vehicle and steering-system parameters of the simulator, and their steady-state relations.
 
-The equations are integrated inline in :mod:`._simulator` (a tight loop over Python floats is an
-order of magnitude faster than calling functions per step); this module holds the parameters and
-the closed-form relations the virtual driver's internal model uses.
+This module holds the parameters, the closed-form relations the virtual driver's internal model
+uses, and the vehicle's equations of motion (:func:`single_track`); the steering system's step
+is :mod:`._steering`'s, and :mod:`._closed_loop` integrates both with the driver. Every step
+function works on Python floats with its constants bound once per simulation: a tight loop
+over floats is an order of magnitude faster than NumPy on arrays of one element.
 
 Vehicle: single-track (bicycle) model at constant forward speed ``u`` with lateral velocity ``v``
 and yaw rate ``r`` at the centre of mass, front/rear tyre forces ``F = F_max tanh(C alpha / F_max)``
@@ -76,7 +78,9 @@ class VehicleParameters:
     ``wheel_damping`` is the steering's viscous damping and ``wheel_friction`` its Coulomb
     friction, smoothed over ``friction_velocity``, at the lower column with a torsion bar.
     ``sensor_noise`` scales the sensor errors of the simulator's ``sensor_noise`` argument
-    (the car's sensor set: 1 is "typical").
+    (the car's sensor set: 1 is "typical"). The simulator refuses a parameter outside the
+    range in which a car stays a car and its integration stays sound (a mass of 500 to
+    5000 kg, a roll inertia of 100 to 3000 kg m^2...), naming the parameter and the range.
 
     Examples
     --------
@@ -160,6 +164,52 @@ class VehicleParameters:
         g0, g1 = 1.0 + self.assist_gain, self.assist_gain_slope
         magnitude = (math.sqrt(g0 * g0 + 4.0 * g1 * abs(load)) - g0) / (2.0 * g1)
         return math.copysign(magnitude, load)
+
+
+def single_track(vehicle, speed):
+    """The vehicle's equations of motion on the road at ``speed`` [m/s] (module docstring).
+
+    Returns
+    -------
+    rates : callable
+        ``rates(road_wheel, v, r, phi, phi_d, e_y, e_psi, kappa) -> (aligning, v_d, r_d, a_y,
+        phi_dd, s_d, e_y_d)``: from the steering-wheel angle that steers the road wheels
+        (``road_wheel``, the wheel's or the lower column's, divided by the steering ratio
+        here), the lateral velocity, the yaw rate, the roll angle and velocity, the lateral
+        and heading deviations from the road's centreline and its curvature ``kappa``, the
+        front tyres' aligning torque at the steering wheel, the derivatives of the lateral
+        velocity and the yaw rate, the lateral acceleration, the roll acceleration, and the
+        speeds along and across the road.
+    """
+    u = speed
+    m, iz, lf, lr = vehicle.mass, vehicle.yaw_inertia, vehicle.front_distance, vehicle.rear_distance
+    cf, cr = vehicle.front_cornering_stiffness, vehicle.rear_cornering_stiffness
+    f_max = vehicle.friction_coefficient * vehicle.front_load
+    r_max = vehicle.friction_coefficient * vehicle.rear_load
+    ms_h = vehicle.sprung_mass * vehicle.roll_arm
+    ix, c_roll = vehicle.roll_inertia, vehicle.roll_damping
+    k_roll = vehicle.roll_stiffness - ms_h * GRAVITY
+    ratio = vehicle.steering_ratio
+    t_mech, t_pneu = vehicle.mechanical_trail, vehicle.pneumatic_trail
+    slip_t = vehicle.pneumatic_trail_slip
+    tanh, sin, cos = math.tanh, math.sin, math.cos
+
+    def rates(road_wheel, v, r, phi, phi_d, e_y, e_psi, kappa):
+        # tyres (saturating), the aligning torque of the front ones, the body, the road
+        alpha_f = road_wheel / ratio - (v + lf * r) / u
+        alpha_r = (lr * r - v) / u
+        force_f = f_max * tanh(cf * alpha_f / f_max)
+        force_r = r_max * tanh(cr * alpha_r / r_max)
+        trail = t_mech + t_pneu * max(0.0, 1.0 - abs(alpha_f) / slip_t)
+        v_d = (force_f + force_r) / m - u * r
+        r_d = (lf * force_f - lr * force_r) / iz
+        a_y = v_d + u * r
+        phi_dd = (ms_h * a_y - k_roll * phi - c_roll * phi_d) / ix
+        s_d = (u * cos(e_psi) - v * sin(e_psi)) / (1.0 - kappa * e_y)
+        e_y_d = u * sin(e_psi) + v * cos(e_psi)
+        return force_f * trail / ratio, v_d, r_d, a_y, phi_dd, s_d, e_y_d
+
+    return rates
 
 
 #: What :func:`draw_vehicle` draws, uniformly within ``(low, high)``: parameter name of
@@ -250,37 +300,80 @@ def check_vehicle(vehicle):
             f"fields or a VehicleParameters, got vehicle={vehicle!r}."
         )
     for name, value in asdict(vehicle).items():
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, numbers.Real)
-            or math.isnan(value)
-            or (math.isinf(value) and name != "column_stiffness")
-            or value < 0
-            or (value == 0 and name not in _MAY_BE_ZERO)
-        ):
-            if name == "column_stiffness":
-                what = "a positive number (math.inf: a rigid column)"
-            else:
-                least = "non-negative" if name in _MAY_BE_ZERO else "positive"
-                what = f"a finite {least} number"
-            raise ValueError(f"vehicle parameter {name} must be {what}, got {name}={value!r}.")
-    if not vehicle.steering_wheel_share < 1.0:
-        raise ValueError(
-            "vehicle parameter steering_wheel_share must be below 1 (the lower column and the "
-            "rack keep some inertia), got "
-            f"steering_wheel_share={vehicle.steering_wheel_share!r}."
-        )
+        _check_parameter(name, value)
+    _check_balance(vehicle)
     return vehicle
 
 
-# parameters that may vanish (no friction, no assist, no trail, clean sensors, no roll damping)
-_MAY_BE_ZERO = {
-    "wheel_friction",
-    "wheel_damping",
-    "assist_gain",
-    "mechanical_trail",
-    "pneumatic_trail",
-    "sensor_noise",
-    "roll_damping",
-    "column_damping",
+#: Where each parameter of :class:`VehicleParameters` keeps a car a car and the simulator's
+#: integration (semi-implicit Euler at 200 Hz or faster) sound: ``(low, high, unit, why)``.
+#: Every drawn range (:data:`VEHICLE_RANGES`) and the reference car lie inside; a low of 0 is
+#: a part that may be absent (no friction, no assist, no trail, clean sensors, no damping).
+VEHICLE_LIMITS = {
+    "mass": (500.0, 5000.0, "kg", "a car, from a city car to a van"),
+    "yaw_inertia": (200.0, 10_000.0, "kg m^2", "a car's, about mass times the axles' distances"),
+    "front_distance": (0.5, 3.0, "m", "a car's axle from its centre of mass"),
+    "rear_distance": (0.5, 3.0, "m", "a car's axle from its centre of mass"),
+    "front_cornering_stiffness": (1e4, 5e5, "N/rad", "a car's axle"),
+    "rear_cornering_stiffness": (1e4, 5e5, "N/rad", "a car's axle"),
+    "friction_coefficient": (0.05, 1.5, "-", "from ice to a dry track"),
+    "sprung_mass": (300.0, 5000.0, "kg", "at most the mass"),
+    "roll_arm": (0.05, 1.5, "m", "a car's centre of mass above its roll axis"),
+    "roll_inertia": (100.0, 3000.0, "kg m^2", "a car body's about its roll axis"),
+    "roll_stiffness": (1e4, 5e5, "Nm/rad", "a car's suspension"),
+    "roll_damping": (0.0, 2e4, "Nms/rad", "a car's suspension, stable when stepped at 200 Hz"),
+    "width": (1.0, 3.0, "m", "a car's"),
+    "steering_ratio": (5.0, 30.0, "-", "a car's steering"),
+    "wheel_inertia": (0.005, 0.5, "kg m^2", "a steering wheel, column and reflected rack"),
+    "wheel_damping": (0.0, 5.0, "Nms/rad", "a steering column's"),
+    "wheel_friction": (0.0, 5.0, "Nm", "a steering system's"),
+    "friction_velocity": (0.001, 10.0, "rad/s", "the friction's band"),
+    "mechanical_trail": (0.0, 0.1, "m", "a car's caster trail"),
+    "pneumatic_trail": (0.0, 0.1, "m", "a car tyre's"),
+    "pneumatic_trail_slip": (0.01, 0.5, "rad", "a car tyre's"),
+    "assist_gain": (0.0, 10.0, "-", "a power assist's boost"),
+    "assist_gain_slope": (0.001, 5.0, "1/Nm", "a power assist's boost curve"),
+    "assist_max": (0.1, 50.0, "Nm", "a power assist's largest torque"),
+    "sensor_noise": (0.0, 10.0, "-", "1 is a typical sensor set"),
+    "column_stiffness": (10.0, math.inf, "Nm/rad", "a torsion bar, or math.inf: a rigid column"),
+    "column_damping": (0.0, 10.0, "Nms/rad", "a torsion bar's"),
+    "steering_wheel_share": (
+        0.001,
+        0.999,
+        "-",
+        "of the inertia above the torsion bar: the wheel, the lower column and the rack keep some",
+    ),
 }
+
+
+def _check_parameter(name, value):
+    """Refuse a parameter that is not a real number within its :data:`VEHICLE_LIMITS`."""
+    low, high, unit, why = VEHICLE_LIMITS[name]
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, numbers.Real)
+        or math.isnan(value)
+        or (math.isinf(value) and not math.isinf(high))
+    ):
+        raise ValueError(f"vehicle parameter {name} must be a finite number, got {name}={value!r}.")
+    if not low <= value <= high:
+        raise ValueError(
+            f"vehicle parameter {name} must be within [{low:g}, {high:g}] {unit} ({why}), got "
+            f"{name}={value!r}."
+        )
+
+
+def _check_balance(vehicle):
+    """Refuse parameters that are each within their limits but not together."""
+    if vehicle.sprung_mass > vehicle.mass:
+        raise ValueError(
+            f"vehicle parameter sprung_mass={vehicle.sprung_mass!r} must be at most "
+            f"mass={vehicle.mass!r} (the body is part of the car)."
+        )
+    tipping = vehicle.sprung_mass * vehicle.roll_arm * GRAVITY
+    if not vehicle.roll_stiffness > 2.0 * tipping:
+        raise ValueError(
+            f"vehicle parameter roll_stiffness={vehicle.roll_stiffness!r} must be more than "
+            f"twice sprung_mass * roll_arm * {GRAVITY} = {tipping:g} Nm/rad: with less the "
+            "body leans more than a radian per g of lateral acceleration, or rolls over."
+        )

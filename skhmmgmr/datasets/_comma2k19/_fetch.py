@@ -2,10 +2,10 @@
 
 comma2k19 is ten zip archives ``Chunk_<n>.zip`` of about 9 GB, each holding segments
 ``Chunk_<n>/<dongle>|<route start>/<number>/``. By default the segments asked for are read out
-of the remote archive by byte ranges (:mod:`._remote`): its central directory, then the members
+of the remote archive by byte ranges (:mod:`.._remote`): its central directory, then the members
 of the segment's ``processed_log/`` and ``global_pose/`` folders (a few MB), never its video;
 ``method="archive"`` downloads the whole archive, resumably, and keeps it. The generic
-verification and unpacking helpers are in :mod:`._download`.
+verification and unpacking helpers are in :mod:`.._download`.
 """
 
 import numbers
@@ -20,14 +20,8 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
-from ._base import get_data_home
-from ._comma2k19 import (
-    ROUTE_PATTERN,
-    DamagedSegmentError,
-    check_options,
-    load_comma2k19_segment,
-)
-from ._download import (
+from .._base import get_data_home
+from .._download import (
     atomic_open,
     check_zip,
     extract_folders,
@@ -35,14 +29,20 @@ from ._download import (
     member_parts,
     remove_stale_parts,
 )
-from ._frame import concat_frames
-from ._remote import (
+from .._frame import concat_frames
+from .._remote import (
     check_url,
     download,
     hub_sha256,
     member_ranges,
     read_manifest,
     remote_zip,
+)
+from ._segment import (
+    ROUTE_PATTERN,
+    DamagedSegmentError,
+    check_options,
+    load_comma2k19_segment,
 )
 
 COMMA2K19_URL = "https://huggingface.co/datasets/commaai/comma2k19/resolve/main/"
@@ -133,8 +133,8 @@ def unpack_segments(archive, reader, root, members, *, progress=False, desc=None
     """Unpack the members ``{key: [(info, parts, inside), ...]}`` into ``<root>/<route>/<number>/``.
 
     A batch of segments at a time: their byte ranges are fetched at once when ``reader`` (the
-    archive's :class:`._remote.RangeReader`) is given, their folders are renamed into place
-    whole (:func:`._download.extract_folders`), then the batch's keys are yielded.
+    archive's :class:`.._remote.RangeReader`) is given, their folders are renamed into place
+    whole (:func:`.._download.extract_folders`), then the batch's keys are yielded.
     """
     keys = list(members)
     with tqdm(total=len(keys), unit="segment", desc=desc, disable=not progress) as bar:

@@ -4,7 +4,7 @@ comma2k19 (comma.ai, MIT licence) is 33 hours of highway commute split into one-
 segments. Segments of chunks 1 and 2 come from a Toyota RAV4, whose CAN bus carries the
 driver's torque on the steering wheel; this module decodes it, together with the steering and
 vehicle-motion signals and, on request, the signals that tell who steers (openpilot or the
-driver), with openpilot's Toyota DBC (:mod:`._comma2k19_can`); it puts them on a uniform time
+driver), with openpilot's Toyota DBC (:mod:`._can`); it puts them on a uniform time
 grid and can keep the spans the driver steers alone, each as a recording of its own.
 """
 
@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import savgol_filter
 
-from .._core._schema import DRIVER, RECORDING, TARGET, TIME
-from ._comma2k19_can import can_decoder
-from ._frame import check_rate, tidy_frame
+from ..._core._schema import DRIVER, RECORDING, TARGET, TIME
+from .._frame import check_rate, tidy_frame
+from ._can import can_decoder
 
 BUS = 0
 # The panda marks the frames the comma device sent (openpilot's commands) with bit 7 of the bus.

@@ -21,6 +21,9 @@ power assist, scaled by ``feel_gain``) plus the arm stiffness times the desired 
 through a first-order muscle activation lag. The arm impedance (stiffness on the actual angle,
 damping, inertia) acts at the wheel without lag.
 Remnant: coloured noise on the desired angle, and on the torque scaled with the control effort.
+
+:func:`human_steering` is the model's step: the driver's torque at the wheel at every
+integration step of the closed loop (:mod:`._closed_loop`).
 """
 
 import math
@@ -28,6 +31,11 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from scipy.signal import lfilter
+
+from ._road import LANE_WIDTH
+
+CORNER_CUT_RADIUS = 300.0  # [m] radius at which the corner cut is corner_cutting * tolerance
+LINE_LIMIT = 0.8  # [m] largest intended offset from the centre of a 3.5 m lane (car 1.8 m wide)
 
 
 @dataclass(frozen=True)
@@ -180,3 +188,106 @@ def coloured_noise(n, dt, correlation_time, rms, rng):
     b = math.sqrt(1.0 - a * a)
     noise, _ = lfilter([b], [1.0, -a], white[1:], zi=[a * white[0]])
     return rms * noise
+
+
+def draw_remnants(driver, n_steps, dt, rng):
+    """The human driver's coloured noises over ``n_steps`` integration steps: on the desired
+    angle, on the torque, and the lane wander (drawn for every driver, so that the sensor
+    errors drawn next are the same whoever drives)."""
+    return (
+        coloured_noise(n_steps, dt, driver.angle_remnant_time, driver.angle_remnant, rng),
+        coloured_noise(n_steps, dt, 0.1, driver.torque_remnant, rng),
+        coloured_noise(n_steps, dt, driver.lane_wander_time, driver.lane_wander, rng),
+    )
+
+
+def human_steering(driver, vehicle, road, offsets, speed, dt, remnants):
+    """The virtual driver's torque at the steering wheel, one integration step at a time.
+
+    Parameters
+    ----------
+    driver : DriverParameters
+        The recording's driver (drawn by :func:`sample_driver`).
+    vehicle : VehicleParameters
+        The car, which the driver's internal model knows.
+    road : Road
+        The section; ``offsets`` is the lane target's offset along it (the manoeuvres).
+    speed, dt : float
+        The car's speed [m/s] and the integration step [s].
+    remnants : tuple of ndarray
+        :func:`draw_remnants`' noises, one value per integration step.
+
+    Returns
+    -------
+    hand_torque : callable
+        ``hand_torque(k, s, e_y, e_psi, s_d, e_y_d, e_psi_d, theta)``: the driver's torque
+        at the wheel at integration step ``k`` (the muscle torque less the arm stiffness
+        times the wheel's angle ``theta``, with the torque remnant), seeing the car's arc
+        length ``s`` on the road, its lateral and heading deviations and their rates (those
+        of the step before). It holds the driver's state: the delay line of the visual layer,
+        the desired angle and the muscle's activation, and must be called at every step, in
+        order.
+    """
+    k_arm = driver.arm_stiffness
+    act_lag = dt / (driver.activation_time + dt)
+    look = speed * driver.preview_time
+    far_gain = 2.0 / (look * look)
+    lead = driver.lead_time
+    # A wider lane leaves the driver more room: the tolerated band, the corner cut and the
+    # deviation at which the correction grows scale with the lane's width.
+    lane_scale = road.lane_width / LANE_WIDTH
+    line_limit = LINE_LIMIT + (road.lane_width - LANE_WIDTH) / 2.0
+    near_gain, tol = driver.near_gain, driver.lane_tolerance * lane_scale
+    edge = driver.edge_deviation * lane_scale
+    inv_edge = 1.0 / edge if edge > 0 else 0.0
+    angle_gain = driver.vehicle_model_gain * vehicle.steering_angle_for_curvature(speed)
+    feel = driver.feel_gain * vehicle.aligning_stiffness(speed)
+    fb0, fb1 = 1.0 + vehicle.assist_gain, vehicle.assist_gain_slope
+    n_delay = max(1, int(round(driver.reaction_time / dt)))
+    n_hold = int(round(driver.hold_time / dt))
+    # Lane target (manoeuvre offset + corner cut) and the far point on the road, tabulated.
+    grid = road.s
+    cut = driver.corner_cutting * tol * np.clip(road.curvature * CORNER_CUT_RADIUS, -1.5, 1.5)
+    far = road.lateral_offset(grid, look) + road.at(offsets, grid + look)
+    near, far = offsets.tolist(), far.tolist()
+    cut_near, cut_far = cut.tolist(), road.at(cut, grid + look).tolist()
+    inv_ds = 1.0 / (grid[1] - grid[0])
+    angle_noise, torque_noise, wander = (noise.tolist() for noise in remnants)
+    effort = driver.torque_remnant_effort
+    tanh, sqrt, copysign = math.tanh, math.sqrt, math.copysign
+    delay_line = [0.0] * n_delay
+    t_muscle = theta_des = 0.0
+
+    def hand_torque(k, s, e_y, e_psi, s_d, e_y_d, e_psi_d, theta):
+        nonlocal t_muscle, theta_des
+        x = s * inv_ds
+        i = int(x)
+        f = x - i
+        # the intended line (corner cut + wander) stays within LINE_LIMIT of the lane centre
+        line = cut_near[i] + f * (cut_near[i + 1] - cut_near[i]) + wander[k]
+        lane = near[i] + f * (near[i + 1] - near[i]) + max(-line_limit, min(line_limit, line))
+        line = cut_far[i] + f * (cut_far[i + 1] - cut_far[i]) + wander[k]
+        aim = far[i] + f * (far[i + 1] - far[i]) + max(-line_limit, min(line_limit, line))
+
+        # visual layer, acting after the reaction delay; the lead acts on the far-point drift
+        e_far = aim - e_y - look * e_psi
+        e_far += lead * ((far[i + 1] - far[i]) * inv_ds * s_d - e_y_d - look * e_psi_d)
+        e_near = e_y - lane
+        outside = e_near - tol * tanh(e_near / tol)
+        outside *= 1.0 + (e_near * inv_edge) ** 2
+        theta_vis = angle_gain * (far_gain * e_far - near_gain * outside) + angle_noise[k]
+        j = k % n_delay
+        delayed = delay_line[j]
+        delay_line[j] = theta_vis
+        if n_hold == 0 or k % n_hold == 0:
+            theta_des = delayed
+
+        # neuromuscular layer: the activation lag acts on the command (expected steering
+        # feel plus the equilibrium point of the arm stiffness), the arm impedance at once
+        load = feel * theta_des
+        t_ff = copysign((sqrt(fb0 * fb0 + 4.0 * fb1 * abs(load)) - fb0) / (2.0 * fb1), load)
+        t_muscle += act_lag * (t_ff + k_arm * theta_des - t_muscle)
+        t_hand = t_muscle - k_arm * theta
+        return t_hand + (1.0 + effort * abs(t_hand)) * torque_noise[k]
+
+    return hand_torque

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._comma2k19 import SegmentFiles, check_options, segment_frame, with_loader_options
+from ._segment import SegmentFiles, check_options, segment_frame, with_loader_options
 
 SAMPLE_ROUTE = "b0c9d2329ad1606b|2018-08-02--08-34-47"
 SAMPLE_SEGMENT = 40

@@ -7,14 +7,26 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .._core._schema import DRIVER, RECORDING, SETTING, SPLIT, TARGET, TIME
-from ._frame import META_DEFAULTS, check_rate, tidy_frame, time_order
+from ..._core._schema import (
+    CROSSING_TIME,
+    DRIVER,
+    MANOEUVRE,
+    META_COLUMNS,
+    RECORDING,
+    SPLIT,
+    TARGET,
+    TIME,
+)
+from .._frame import META_DEFAULTS, check_rate, tidy_frame, time_order
 from ._resample import check_max_gap, resample_recordings
 
 _CSV_SUFFIXES = (".csv", ".csv.gz", ".csv.bz2", ".csv.zip", ".csv.xz")
 _PARQUET_SUFFIXES = (".parquet", ".pq")
 _SOURCE = "__source__"
 _ROW = "__row__"
+# The package's own labels of a simulated frame (what the driver does, when it crosses a
+# marking): metadata kept as they are when a source has them, never features.
+_LABELS = (MANOEUVRE, CROSSING_TIME)
 
 
 def _suffix(path):
@@ -120,7 +132,7 @@ def _sources(data, recording):
             )
         stems[stem] = path
         # Ids are text: read as numbers, "007" and "7" would be one recording.
-        frame = read_table(path, (recording, DRIVER, SPLIT))
+        frame = read_table(path, (recording, DRIVER, SPLIT, MANOEUVRE))
         yield f"file {str(path)!r}", frame, stem
 
 
@@ -138,7 +150,7 @@ def _select(description, frame, stem, *, recording, time, target, features):
             f"columns are {available}. Name yours with the recording=, time=, target= and "
             "features= parameters."
         )
-    meta = {recording, time, target, RECORDING, DRIVER, SETTING, SPLIT, TIME, TARGET}
+    meta = {recording, time, target, *META_COLUMNS, TARGET}
     if features is not None and meta.intersection(features):
         raise ValueError(
             f"The features {sorted(meta.intersection(features))} are meta, time or target "
@@ -173,6 +185,7 @@ def _select(description, frame, stem, *, recording, time, target, features):
     for name, fill in META_DEFAULTS.items():
         out[name] = frame[name].to_numpy() if name in available else np.full(n_rows, fill)
     out[TIME] = frame[time].to_numpy(dtype=float)
+    out.update({name: frame[name].to_numpy() for name in _LABELS if name in available})
     for column in features:
         out[column] = frame[column].to_numpy(dtype=float)
     out[TARGET] = frame[target].to_numpy(dtype=float)
@@ -200,7 +213,10 @@ def load_recordings(
     driver torque. A source holds one recording, named after the file (its name without the
     extension), or several, told apart by a recording column. Optional ``driver``, ``setting``
     and ``split`` columns are kept; when absent, ``driver`` and ``split`` are filled with
-    ``"unknown"`` and ``setting`` (a simulator setting) with NaN.
+    ``"unknown"`` and ``setting`` (a simulator setting) with NaN. The labels of a simulated
+    frame, ``manoeuvre`` and ``crossing_time`` (:func:`make_lane_keeping`), are kept as
+    labels, never taken for features, so that a frame of the simulator written to a file
+    loads back as it was.
 
     Parameters
     ----------
@@ -245,7 +261,8 @@ def load_recordings(
     Returns
     -------
     frame : pandas.DataFrame
-        Columns ``recording``, ``driver``, ``setting``, ``split``, ``time``, the features, and
+        Columns ``recording``, ``driver``, ``setting``, ``split``, ``time`` (then
+        ``manoeuvre`` and ``crossing_time`` where the sources have them), the features, and
         ``driver_torque``; recording ids, drivers and splits are text (read as text from CSV
         files, so that ``"007"`` and ``"7"`` stay two recordings). Rows of a recording are
         contiguous and sorted by time; recordings come in the order they first appear. No row
@@ -289,7 +306,7 @@ def load_recordings(
         check_max_gap(max_gap, sampling_rate)
     if isinstance(features, str):
         features = [features]
-    parts, feature_names, first, held = [], None, None, set()
+    parts, feature_names, labels, first, held = [], None, None, None, set()
     for description, frame, stem in _sources(data, recording):
         part, names = _select(
             description,
@@ -300,14 +317,20 @@ def load_recordings(
             target=target,
             features=features,
         )
+        kept = [name for name in _LABELS if name in part.columns]
         if feature_names is None:
-            feature_names, first = names, description
+            feature_names, labels, first = names, kept, description
         elif set(names) != set(feature_names):
             raise ValueError(
                 f"The features of {description} ({names}) differ from those of {first} "
                 f"({feature_names}): pass features= to choose the common ones."
             )
-        parts.append(part[[*part.columns[:5], *feature_names, TARGET, _SOURCE, _ROW]])
+        elif kept != labels:
+            raise ValueError(
+                f"{description[0].upper()}{description[1:]} has the label column(s) {kept}, "
+                f"{first} {labels}: give every source the same, or drop them."
+            )
+        parts.append(part[[*part.columns[:5], *labels, *feature_names, TARGET, _SOURCE, _ROW]])
         dtypes = {str(column): dtype for column, dtype in frame.dtypes.items()}
         held.update(name for name in names if not pd.api.types.is_float_dtype(dtypes[name]))
     frame = pd.concat(parts, ignore_index=True) if len(parts) > 1 else parts[0]

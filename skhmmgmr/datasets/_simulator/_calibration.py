@@ -3,7 +3,7 @@
 import numpy as np
 import pandas as pd
 
-from .._core._schema import DRIVER, RECORDING, SETTING, TARGET
+from ..._core._schema import DRIVER, RECORDING, SETTING, TARGET
 
 # Bands (around Table C.2 of the thesis) that a 5-minute setting-7 highway section meets for
 # every driver style; checked by the test-suite. Angles in degrees.

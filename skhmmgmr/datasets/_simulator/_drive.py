@@ -1,22 +1,17 @@
 """Closed loop with any driver at the wheel: a human style of the simulator, a fitted model of
 the package, or any function from one sensed row to a torque."""
 
-import math
 import warnings
 
 import numpy as np
-import pandas as pd
 
-from .._core._schema import FEATURE_NAMES
+from ..._core._schema import FEATURE_NAMES
+from ._closed_loop import LOST_CONTROL
 from ._driver import DRIVER_STYLES
+from ._lane_keeping import human_run
+from ._model_driver import as_torque, torque_function
+from ._section import Section, SectionSpec
 from ._sensors import SensorStream, draw_errors
-from ._simulator import (
-    LOST_CONTROL,
-    Section,
-    _features,
-    checked_section_arguments,
-    make_lane_keeping,
-)
 
 # The human whose parameters a model run draws (and does not use): every style draws as many
 # numbers, so the road, the manoeuvres and the sensor errors are those of any human's run.
@@ -61,6 +56,10 @@ def drive(
           at a time, its inputs found by name likewise;
         - a callable ``driver(row) -> torque``, ``row`` an array of the 18 sensed features in
           the order of :data:`FEATURE_NAMES` (read-only), called once per sample in time order.
+
+        A pipeline whose velocity filter was made for another sampling period than
+        ``1 / sampling_rate`` is refused, as its ``predict`` refuses such rows; a torque that is
+        not one real, finite number is refused naming the driver and the time.
     setting, duration, sampling_rate, speed_kmh, scenario : see :func:`make_lane_keeping`
     random_state, road_random_state : see :func:`make_lane_keeping`
         The same values give the same road, manoeuvres and sensor errors for every driver.
@@ -124,74 +123,45 @@ def drive(
     >>> bool(lane_keeping_metrics(run)["lateral_deviation_max"] < 1.75)
     True
     """
-    duration, sampling_rate, speed_kmh, setting, scenario, vehicle = checked_section_arguments(
-        duration, sampling_rate, speed_kmh, setting, scenario, sensor_noise, vehicle
-    )
+    spec = SectionSpec.of(locals(), "drive")
     if isinstance(driver, str):
         if driver not in DRIVER_STYLES:
             raise ValueError(
                 f"Unknown driver style driver={driver!r}; expected one of "
                 f"{sorted(DRIVER_STYLES)}, a fitted model or a callable."
             )
-        return make_lane_keeping(
-            duration,
-            setting=setting,
-            driver=driver,
-            speed_kmh=speed_kmh,
-            sampling_rate=sampling_rate,
-            scenario=scenario,
-            random_state=random_state,
-            road_random_state=road_random_state,
-            recording=recording,
-            split=split,
-            sensor_noise=sensor_noise,
-            vehicle=vehicle,
-        )
-    name, torque_of = _torque_function(driver)
-    section = Section(
-        duration,
-        setting,
-        _UNUSED_HUMAN,
-        speed_kmh,
-        sampling_rate,
-        scenario,
-        random_state,
-        road_random_state,
-        vehicle,
-    )
-    dt = 1.0 / sampling_rate
-    scale = section.sensor_scale(sensor_noise)
+        return human_run(spec, driver, recording, split)
+    name, torque_of = torque_function(driver, spec.sampling_rate)
+    section = Section(spec, _UNUSED_HUMAN)
+    dt, scale = 1.0 / spec.sampling_rate, spec.sensor_scale
     errors = None if scale is None else draw_errors(section.n_samples, dt, scale, section.rng)
     sensors = SensorStream(FEATURE_NAMES, errors, dt, section.speed, scale)
     sensed = np.empty((section.n_samples, len(FEATURE_NAMES)))
 
     def torque_source(row, states):
-        sensed[row] = sense(section, sensors, row, states)
+        sensed[row] = section.sensed(sensors, row, states)
         view = sensed[row]
         view.flags.writeable = False
         try:
             torque = torque_of(view)
         finally:
             view.flags.writeable = True
-        return _as_torque(torque, name, row / sampling_rate)
+        return as_torque(torque, f"The driver {name}", row / spec.sampling_rate)
 
     log = section.simulate(torque_source)
     n_driven = log.shape[0]
     # the torque sensor reads the log's torque: the driver's own with a rigid column, the
     # torsion bar's with a compliant one
-    torques = np.array([sensors.torque(i, value) for i, value in enumerate(log[:, 13].tolist())])
-    if recording is None:
-        recording = f"{name}-{scenario}-s{setting}"
+    torques = np.array([sensors.torque(i, value) for i, value in enumerate(log[:, -1].tolist())])
     frame = section.frame(
         log,
         dict(zip(FEATURE_NAMES, sensed[:n_driven].T, strict=True)),
         torques,
-        recording=recording,
+        recording=spec.recording_of(name) if recording is None else recording,
         driver=name,
         split=split,
-        scale=scale,
     )
-    lost = None if n_driven == section.n_samples else n_driven / sampling_rate
+    lost = None if n_driven == section.n_samples else n_driven / spec.sampling_rate
     frame.attrs["lost_control"] = lost
     if lost is not None:
         warnings.warn(
@@ -201,64 +171,3 @@ def drive(
             stacklevel=2,
         )
     return frame
-
-
-def sense(section, sensors, row, states):
-    """The sensed features of logged row ``row`` of ``section``, in the order of
-    :data:`FEATURE_NAMES`, from the states a torque source of :func:`_simulate` gets."""
-    log = np.array([(*states, 0.0)])
-    columns, _ = _features(log, section.road, section.vehicle, section.speed)
-    return sensors.features(row, {k: float(v[0]) for k, v in columns.items()})
-
-
-def _torque_function(driver):
-    """``(name, torque_of(row))`` of a model or a callable driver."""
-    if hasattr(driver, "filter_stream"):
-        stream = driver.filter_stream()
-        positions = _input_positions(driver)
-        return type(driver).__name__, lambda row: stream.update(row[positions])
-    if hasattr(driver, "predict"):
-        positions = _input_positions(driver)
-        columns = [FEATURE_NAMES[i] for i in positions]
-
-        def predict_one(row):
-            return driver.predict(pd.DataFrame([row[positions]], columns=columns))
-
-        return type(driver).__name__, predict_one
-    if callable(driver):
-        return getattr(driver, "__name__", type(driver).__name__), driver
-    raise TypeError(
-        f"driver must be a style name, a fitted model or a callable; got {type(driver).__name__}."
-    )
-
-
-def _input_positions(model):
-    names = getattr(model, "feature_names_in_", None)
-    if names is None:
-        raise ValueError(
-            f"{type(model).__name__} has no feature_names_in_: fit it on a DataFrame whose "
-            f"columns are sensed features ({', '.join(FEATURE_NAMES)}) so that drive can "
-            "give it its inputs by name."
-        )
-    unknown = [str(n) for n in names if n not in FEATURE_NAMES]
-    if unknown:
-        raise ValueError(
-            f"{type(model).__name__} reads {unknown}, which the simulator does not sense; "
-            f"it senses {list(FEATURE_NAMES)}."
-        )
-    return np.array([FEATURE_NAMES.index(n) for n in names])
-
-
-def _as_torque(value, name, time):
-    value = np.asarray(value, dtype=float).ravel()
-    if value.size != 1:
-        raise ValueError(
-            f"The driver {name} returned {value.size} values at {time:.3f} s; one torque is "
-            "expected."
-        )
-    torque = float(value[0])
-    if not math.isfinite(torque):
-        raise ValueError(
-            f"The driver {name} returned a non-finite torque ({torque}) at {time:.3f} s."
-        )
-    return torque

@@ -1,26 +1,21 @@
 """The data protocol of the thesis (Appendix B.4): training, validation and test sections."""
 
-import numbers
-from dataclasses import asdict
+from dataclasses import asdict, replace
+from numbers import Integral
 
 import numpy as np
 from joblib import Parallel, delayed
 from sklearn.utils import check_random_state
 
+from ..._core._compat import Interval, validate_params
+from .._frame import concat_frames
 from ._driver import DRIVER_STYLES
-from ._frame import concat_frames
-from ._sensors import check_sensor_noise
-from ._simulator import make_lane_keeping
-from ._vehicle import check_vehicle
+from ._lane_keeping import cached, human_run
+from ._section import SectionSpec
 
 TRAIN_SETTINGS = (1, 2, 3, 4, 5, 6)
 EVALUATION_SETTING = 7
-
-
-def _check_count(value, name):
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 0:
-        raise ValueError(f"{name} must be a non-negative integer, got {name}={value!r}.")
-    return int(value)
+_COUNT = [Interval(Integral, 0, None, closed="left")]
 
 
 def _sections(n_train_per_setting, n_validation, n_test):
@@ -33,6 +28,15 @@ def _sections(n_train_per_setting, n_validation, n_test):
     return sections
 
 
+@validate_params(
+    {
+        "n_train_per_setting": _COUNT,
+        "n_validation": _COUNT,
+        "n_test": _COUNT,
+        "n_jobs": [Integral, None],
+    },
+    prefer_skip_nested_validation=False,
+)
 def make_driving_protocol(
     drivers=("defensive", "aggressive", "novice"),
     *,
@@ -104,6 +108,14 @@ def make_driving_protocol(
     >>> frame.groupby("split").recording.nunique().to_dict()
     {'test': 1, 'train': 6, 'validation': 1}
     """
+    # every section's spec is this one's with its own setting and seeds, checked here once
+    template = SectionSpec.of(
+        locals(),
+        "make_driving_protocol",
+        setting=EVALUATION_SETTING,
+        random_state=None,
+        road_random_state=None,
+    )
     if isinstance(drivers, str):
         drivers = (drivers,)
     drivers = tuple(drivers)
@@ -115,15 +127,9 @@ def make_driving_protocol(
                 f"Unknown driver style {driver!r} in drivers; expected keys of DRIVER_STYLES "
                 f"{sorted(DRIVER_STYLES)}."
             )
-    scale = check_sensor_noise(sensor_noise)
-    vehicle = check_vehicle(vehicle)
     if len(set(drivers)) != len(drivers):
         raise ValueError(f"drivers must not repeat a style, got drivers={drivers!r}.")
-    sections = _sections(
-        _check_count(n_train_per_setting, "n_train_per_setting"),
-        _check_count(n_validation, "n_validation"),
-        _check_count(n_test, "n_test"),
-    )
+    sections = _sections(n_train_per_setting, n_validation, n_test)
     if not sections:
         raise ValueError(
             "The protocol holds no section: n_train_per_setting, n_validation and n_test are all 0."
@@ -132,31 +138,23 @@ def make_driving_protocol(
     high = np.iinfo(np.int32).max
     road_seeds = rng.randint(high, size=len(sections))
     driver_seeds = rng.randint(high, size=(len(drivers), len(sections)))
+    run = human_run if cache is None else cached(cache)
     jobs = []
     for d, driver in enumerate(drivers):
         for k, (split, setting, i) in enumerate(sections):
-            kwargs = dict(
-                duration=duration,
+            spec = replace(
+                template,
                 setting=setting,
-                driver=driver,
-                speed_kmh=speed_kmh,
-                sampling_rate=sampling_rate,
-                scenario=scenario,
                 random_state=int(driver_seeds[d, k]),
                 road_random_state=int(road_seeds[k]),
-                recording=f"{driver}-{split}-s{setting}-{i}",
-                split=split,
-                sensor_noise=sensor_noise,
-                vehicle=vehicle,
-                cache=cache,
             )
-            jobs.append(delayed(make_lane_keeping)(**kwargs))
+            jobs.append(delayed(run)(spec, driver, f"{driver}-{split}-s{setting}-{i}", split))
     return concat_frames(
         Parallel(n_jobs=n_jobs)(jobs),
         attrs={
-            "scenario": scenario,
-            "speed": speed_kmh / 3.6,
-            "sensor_noise": (None if scale is None else scale * vehicle.sensor_noise),
-            "vehicle": asdict(vehicle),
+            "scenario": template.scenario,
+            "speed": template.speed,
+            "sensor_noise": template.sensor_scale,
+            "vehicle": asdict(template.vehicle),
         },
     )

@@ -19,25 +19,30 @@ stream, and so the starts that follow, never see a rollout.
 """
 
 import copy
-import numbers
+from numbers import Integral
 
 import numpy as np
 import pandas as pd
 
-from .._core._schema import FEATURE_NAMES, RECORDING, TARGET, TIME
-from ._drive import _input_positions, sense
+from ..._core._compat import Interval, validate_params
+from ..._core._schema import FEATURE_NAMES, RECORDING, TARGET, TIME
+from ._closed_loop import INITIAL_COLUMNS, LOG_COLUMNS, simulate
 from ._driver import check_driver
+from ._model_driver import as_torque, model_stream
+from ._section import Section, SectionSpec
 from ._sensors import SensorStream, draw_errors, measure
-from ._simulator import Section, _features, _simulate, checked_section_arguments
 
 HORIZON = "horizon"
 ESTIMATE = "estimate"
 LOST = "lost_control"
-# The logged columns that make the state a rollout starts from (see _simulate's ``initial``).
-_STATE_COLUMNS = [0, 1, 2, 3, 5, 7, 8, 10, 11, 12]
-_TORQUE_COLUMN = 13
+# The logged columns that make the state a rollout starts from (see simulate's ``initial``).
+_STATE_COLUMNS = [LOG_COLUMNS.index(name) for name in INITIAL_COLUMNS]
 
 
+@validate_params(
+    {"start_every": [Interval(Integral, 1, None, closed="left")], "return_proba": ["boolean"]},
+    prefer_skip_nested_validation=False,
+)
 def torque_ahead(
     model,
     *,
@@ -70,7 +75,8 @@ def torque_ahead(
     model : fitted estimator
         A fitted model of the package with ``filter_stream()`` (an
         :class:`~skhmmgmr.HMMGMRRegressor` or a torque pipeline) whose inputs are sensed
-        features, found by name (``feature_names_in_``), as for :func:`drive`.
+        features, found by name (``feature_names_in_``), and one output, as for :func:`drive`
+        (a pipeline made for another sampling period is refused likewise).
     horizons : sequence of float, default=(0.25, 0.5, 1.0, 2.0)
         How far ahead [s], each ``>= 0`` and a whole number of sampling periods, all
         different; 0 is the model's filtered estimate at ``t``.
@@ -132,37 +138,22 @@ def torque_ahead(
     >>> ahead.groupby("horizon").size().to_dict()
     {0.5: 18, 1.0: 18}
     """
-    duration, sampling_rate, speed_kmh, setting, scenario, vehicle = checked_section_arguments(
-        duration, sampling_rate, speed_kmh, setting, scenario, sensor_noise, vehicle
-    )
+    spec = SectionSpec.of(locals(), "torque_ahead")
     parameters = check_driver(driver)
-    if (
-        isinstance(start_every, bool)
-        or not isinstance(start_every, numbers.Integral)
-        or start_every < 1
-    ):
-        raise ValueError(
-            f"start_every must be a positive integer, got start_every={start_every!r}."
+    if not hasattr(model, "filter_stream"):
+        raise TypeError(
+            "model must be a fitted model of the package with filter_stream() (an "
+            f"HMMGMRRegressor or a torque pipeline); got {type(model).__name__}."
         )
-    stream, positions = _model_stream(model)
-    n_samples = int(round(duration * sampling_rate))
-    horizons, rows_ahead = _check_horizons(horizons, sampling_rate, n_samples)
+    stream, positions = model_stream(model, spec.sampling_rate)
+    who, rate = f"The model {type(model).__name__}", spec.sampling_rate
+    n_samples = spec.n_samples
+    horizons, rows_ahead = _check_horizons(horizons, rate, n_samples)
 
-    section = Section(
-        duration,
-        setting,
-        parameters,
-        speed_kmh,
-        sampling_rate,
-        scenario,
-        random_state,
-        road_random_state,
-        vehicle,
-    )
-    scale = section.sensor_scale(sensor_noise)
-    column = np.empty((section.n_samples, 2))  # the lower column's state, for the rollouts
+    section = Section(spec, parameters)
+    column = np.empty((n_samples, 2))  # the lower column's state, for the rollouts
     log = section.simulate(column_log=column)
-    sensed, torque, errors = measured_log(section, log, scale)
+    sensed, torque, errors = measured_log(section, log)
 
     n_ahead = max(rows_ahead)
     starts = np.arange(0, n_samples - n_ahead, start_every)
@@ -173,12 +164,12 @@ def torque_ahead(
     columns = np.array(rows_ahead)
     next_start = 0
     for t in range(starts[-1] + 1):
-        estimate = stream.update(sensed[t, positions])
+        estimate = as_torque(stream.update(sensed[t, positions]), who, t / rate)
         if t != starts[next_start]:
             continue
         copied = copy.deepcopy(stream)  # the rollout goes on from the filter state at t
         path, path_proba = _torque_path(
-            section, log, column, sensed, errors, scale, t, n_ahead, estimate, copied, positions
+            section, log, column, sensed, errors, t, n_ahead, estimate, copied, positions, who
         )
         estimates[next_start] = path[np.minimum(columns, len(path) - 1)]
         lost[next_start] = columns >= len(path)
@@ -186,12 +177,11 @@ def torque_ahead(
             proba[next_start] = path_proba[np.minimum(columns, len(path) - 1)]
         next_start += 1
 
-    style = driver if isinstance(driver, str) else "custom"
     if recording is None:
-        recording = f"{style}-{scenario}-s{setting}"
+        recording = spec.recording_of(driver if isinstance(driver, str) else "custom")
     result = {
         RECORDING: recording,
-        TIME: np.tile(starts / sampling_rate, len(horizons)),
+        TIME: np.tile(starts / rate, len(horizons)),
         HORIZON: np.repeat(horizons, len(starts)),
         ESTIMATE: estimates.T.ravel(),
         TARGET: torque[starts[None, :] + columns[:, None]].ravel(),
@@ -203,28 +193,17 @@ def torque_ahead(
     return pd.DataFrame(result)
 
 
-def measured_log(section, log, scale):
+def measured_log(section, log):
     """What the logger records of ``log`` (as :func:`make_lane_keeping` measures it): the
     sensed rows (columns in the order of :data:`FEATURE_NAMES`), the measured torque, and the
     sensor errors drawn for them (``None`` without errors), which go on in the rollouts."""
-    clean, torque = _features(log, section.road, section.vehicle, section.speed)
-    dt = 1.0 / section.sampling_rate
+    clean, torque = section.features(log)
+    dt, scale = 1.0 / section.sampling_rate, section.spec.sensor_scale
     errors = None
     if scale is not None:
         errors = draw_errors(len(torque), dt, scale, copy.deepcopy(section.rng))
     measured, torque = measure(clean, torque, dt, section.speed, scale, section.rng)
     return np.column_stack([measured[name] for name in FEATURE_NAMES]), torque, errors
-
-
-def _model_stream(model):
-    """A fresh filter stream of ``model`` and the positions of its inputs in a sensed row."""
-    if not hasattr(model, "filter_stream"):
-        raise TypeError(
-            "model must be a fitted model of the package with filter_stream() (an "
-            f"HMMGMRRegressor or a torque pipeline); got {type(model).__name__}."
-        )
-    stream = model.filter_stream()
-    return stream, _input_positions(model)
 
 
 def _check_horizons(horizons, sampling_rate, n_samples):
@@ -257,12 +236,13 @@ def _check_horizons(horizons, sampling_rate, n_samples):
 
 
 def _torque_path(
-    section, log, column, sensed, errors, scale, start, n_ahead, first, stream, positions
+    section, log, column, sensed, errors, start, n_ahead, first, stream, positions, who
 ):
     """The rollout from row ``start`` (``column``: the lower column's logged states): the
     torques of its rows (the first is ``first``) and the state probabilities of ``stream``
-    (updated in place) after each."""
-    sensors = SensorStream(FEATURE_NAMES, errors, 1.0 / section.sampling_rate, section.speed, scale)
+    (updated in place) after each; ``who`` names the model in errors."""
+    rate, scale = section.sampling_rate, section.spec.sensor_scale
+    sensors = SensorStream(FEATURE_NAMES, errors, 1.0 / rate, section.speed, scale)
     sensors.continue_from(dict(zip(FEATURE_NAMES, sensed[start], strict=True)))
     torques = [first]
     proba = [stream.state_proba_]
@@ -270,7 +250,7 @@ def _torque_path(
     def torque_of(row, sensed_row):
         if row == 0:
             return first
-        torque = stream.update(sensed_row[positions])
+        torque = as_torque(stream.update(sensed_row[positions]), who, (start + row) / rate)
         torques.append(torque)
         proba.append(stream.state_proba_)
         return torque
@@ -287,26 +267,13 @@ def rollout(section, log, start, n_rows, sensors, torque_of, column=None):
     recording's). ``column``: the lower column's states logged with ``log`` (``column_log``
     of the simulation), which a car with a torsion bar starts from; without it the column
     starts at the bar's static twist. Returns the rollout's log (rows of ``log``'s columns)."""
-    previous = log[start - 1, _TORQUE_COLUMN] if start > 0 else 0.0
+    previous = log[start - 1, -1] if start > 0 else 0.0
     initial = (*log[start, _STATE_COLUMNS], previous)
     if column is not None:
         initial += tuple(column[start])
-    n_sub = section.n_sub
 
     def torque_source(row, states):
-        sensed_row = None if row == 0 else sense(section, sensors, start + row, states)
+        sensed_row = None if row == 0 else section.sensed(sensors, start + row, states)
         return torque_of(row, sensed_row)
 
-    return _simulate(
-        section.road,
-        section.offsets,
-        section.vehicle,
-        section.parameters,
-        section.speed,
-        n_rows,
-        n_sub,
-        section.dt,
-        tuple(noise[: n_rows * n_sub] for noise in section.remnants),
-        torque_source,
-        initial,
-    )
+    return simulate(section, n_rows, torque_source, initial)

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ._comma2k19 import check_options, load_comma2k19_segment
-from ._download import file_url
+from .._download import file_url
+from .._remote import check_url, remote_zip, require
 from ._fetch import (
     COMMA2K19_URL,
     check_chunks,
@@ -24,7 +24,7 @@ from ._fetch import (
     segment_name,
     unpack_segments,
 )
-from ._remote import check_url, remote_zip, require
+from ._segment import check_options, load_comma2k19_segment
 
 # The CAN folders the loader reads: raw frames (steering, engagement) and the wheel speed.
 SCAN_FOLDERS = (("processed_log", "CAN", "raw_can"), ("processed_log", "CAN", "speed"))
