@@ -154,7 +154,7 @@ def test_the_row_a_callable_gets_is_the_sensed_features_and_read_only():
     "driver, error, message",
     [
         ("racer", ValueError, "Unknown driver style"),
-        (42, TypeError, "style name, a fitted model or a callable"),
+        (42, TypeError, "style name, a fitted model, an FMU .* or a callable"),
         (lambda row: float("nan"), ValueError, "non-finite torque"),
         (lambda row: [1.0, 2.0], ValueError, "returned 2 values"),
         # a raw float() error before, naming neither the driver nor the time

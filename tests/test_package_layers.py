@@ -27,7 +27,7 @@ LAYERS = (
     # what uses the estimator: the torque pipeline, the search over recordings
     ("torque_pipeline", "_search"),
     # the selectors; the model file of any fitted model (the regressor, the torque pipeline);
-    # the C code of a fitted regressor or torque pipeline
+    # the C code and the FMU of a fitted regressor or torque pipeline
     ("feature_selection", "state_selection", "portable", "export"),
     # the framework over all selectors, the users' checks
     ("selection", "utils"),
