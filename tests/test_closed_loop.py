@@ -249,7 +249,7 @@ def test_lane_keeping_metrics_refuse_bad_input():
         lane_keeping_metrics(frame, vehicle_width=3.5)
     with pytest.raises(ValueError, match="needs the time|no 'time'"):
         lane_keeping_metrics(frame.drop(columns="time"))
-    with pytest.raises(TypeError, match="pandas DataFrame"):
+    with pytest.raises(TypeError, match="'frame' parameter .* 'pandas.DataFrame'"):
         lane_keeping_metrics(frame.to_numpy())
 
 
