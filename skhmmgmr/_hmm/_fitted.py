@@ -5,7 +5,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ._em import HMMParameters
-from ._gmr import condition_on_inputs
+from ._gmr import condition_on_inputs, filter_state_probabilities, gmr_estimates
+from ._readout import smooth_outputs
 
 
 def _frozen(array):
@@ -249,6 +250,21 @@ class FittedHMMGMR:
     def hmm_parameters(self):
         """The HMM in standardised units, as the EM engine takes it."""
         return HMMParameters(self.startprob, self.transmat, self.emissions)
+
+    def estimate(self, standardized, recordings, missing=None, return_std=False):
+        """The causal estimate of the outputs in the data's units (filter order): the filtered
+        state probabilities of the standardised inputs, the GMR estimate, the read-out.
+
+        ``missing`` is :func:`~skhmmgmr._hmm._gmr.read_missing` of ``standardized``. Returns
+        ``(estimate, std)``, both of shape (n_samples, n_outputs); ``std`` (the predictive
+        standard deviation, not smoothed) is None unless ``return_std``.
+        """
+        alpha = filter_state_probabilities(standardized, recordings, self.gmr, missing=missing)
+        estimate, std = gmr_estimates(standardized, alpha, self.gmr, return_std, missing=missing)
+        estimate = smooth_outputs(
+            self.standardization.outputs(estimate), recordings, self.output_decay
+        )
+        return estimate, None if std is None else self.standardization.output_std(std)
 
     def n_parameters(self):
         """Free parameters: start and transition probabilities and the state densities."""

@@ -184,6 +184,9 @@ output_smoothing_
         self.random_state = random_state
         self.verbose = verbose
 
+    # A fresh fit needs the manoeuvres' labels: adapt's "auto" chooses among MAP adaptations.
+    _fits_anew = False
+
     # -- the structure: manoeuvre names and their states ----------------------------------------
     def _set_structure(self, names, sizes):
         for attribute, value in _structure_attributes(names, sizes).items():

@@ -22,12 +22,11 @@ from .._hmm._em_data import Columns
 from .._hmm._em_init import INIT_METHODS
 from .._hmm._emissions import EMISSION_FAMILIES, REFUSED_COVARIANCE_TYPES, emission_family
 from .._hmm._fitted import FittedHMMGMR, Standardization
-from .._hmm._gmr import filter_state_probabilities, gmr_estimates, read_missing
+from .._hmm._gmr import filter_state_probabilities, read_missing
 from .._hmm._missing import observed_counts
 from .._hmm._readout import (
     MAX_TIME_CONSTANT,
     fixed_decay,
-    smooth_outputs,
     time_constant_of,
     weakest_decay,
 )
@@ -348,9 +347,7 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         standardized = model.standardization.inputs(inputs.X)
         noise = stale_noise_for(model, self.missing_values)
         missing = read_missing(standardized, recordings, noise)
-        alpha = filter_state_probabilities(standardized, recordings, model.gmr, missing=missing)
-        estimate, _ = gmr_estimates(standardized, alpha, model.gmr, False, missing=missing)
-        estimate = model.standardization.outputs(estimate)
+        estimate, _ = model.estimate(standardized, recordings, missing)  # no read-out yet
         return weakest_decay(estimate, inputs.Y, recordings)
 
     def _baum_welch(self, columns, recordings):
@@ -437,14 +434,10 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         """
         standardized, recordings, rows, missing = read_inputs(self, X, groups, time)
         model = self.model_
-        alpha = filter_state_probabilities(standardized, recordings, model.gmr, missing=missing)
-        estimate, std = gmr_estimates(standardized, alpha, model.gmr, return_std, missing=missing)
-        estimate = model.standardization.outputs(estimate)
-        estimate = smooth_outputs(estimate, recordings, model.output_decay)
+        estimate, std = model.estimate(standardized, recordings, missing, return_std)
         estimate = rows.to_caller_order(estimate[:, 0] if model.scalar_output else estimate)
         if not return_std:
             return estimate
-        std = model.standardization.output_std(std)
         return estimate, rows.to_caller_order(std[:, 0] if model.scalar_output else std)
 
     def transform(self, X, groups=None, time=None):
