@@ -14,6 +14,9 @@ extensions = [
     "sphinx.ext.autosummary",
     "sphinx.ext.intersphinx",
     "sphinx.ext.mathjax",
+    # a "[source]" link on every API entry to its highlighted code (the module that defines it:
+    # public names keep their own __module__)
+    "sphinx.ext.viewcode",
     # copies MathJax into _static/mathjax and points the pages at it: no CDN, so formulas
     # render offline (a page checks for any script from the network: .ci/run)
     "sphinx-mathjax-offline",

@@ -2,9 +2,9 @@
 A portable model file and a filter that needs only NumPy
 ========================================================
 
-A steering controller does not run scikit-learn. :meth:`~skhmmgmr.HMMGMRRegressor.export_json`
-writes everything the causal HMM-GMR filter needs into one JSON file (the format is described
-in :mod:`skhmmgmr.portable`). This example fits a small model, exports it, and runs a reference
+A steering controller does not run scikit-learn. :func:`skhmmgmr.portable.save` writes
+everything the causal HMM-GMR filter needs into one JSON file (the format is described in
+:mod:`skhmmgmr.portable`). This example fits a small model, saves it, and runs a reference
 implementation of the filter that reads only that file: plain NumPy, no skhmmgmr import. Its
 estimates match :meth:`~skhmmgmr.HMMGMRRegressor.predict` to round-off.
 """
@@ -76,7 +76,7 @@ if __name__ == "__main__":
     import os
     import tempfile
 
-    from skhmmgmr import HMMGMRRegressor
+    from skhmmgmr import HMMGMRRegressor, portable
 
     rng = np.random.default_rng(0)
     X = np.cumsum(rng.normal(scale=0.2, size=(600, 3)), axis=0)
@@ -85,8 +85,8 @@ if __name__ == "__main__":
     model = HMMGMRRegressor(n_states=3, random_state=0).fit(X, y, groups=groups)
 
     path = os.path.join(tempfile.mkdtemp(), "steering_model.json")
-    model.export_json(path, output_names=["steering_torque"])
-    print(f"exported {os.path.getsize(path)} bytes to {path}")
+    portable.save(model, path, output_names=["steering_torque"])
+    print(f"saved {os.path.getsize(path)} bytes to {path}")
 
     rows = groups == "b"
     reference, reference_std = portable_filter(path, X[rows])

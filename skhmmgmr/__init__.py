@@ -1,7 +1,6 @@
 """skhmmgmr: Hidden Markov Model + Gaussian Mixture Regression for scikit-learn."""
 
 from . import (
-    _legacy,
     cluster,
     datasets,
     export,
@@ -11,7 +10,7 @@ from . import (
     state_selection,
     utils,
 )
-from ._core._public import publish
+from ._core._pickled import InconsistentVersionWarning
 from ._hmm._fitted import FittedHMMGMR, Standardization
 from ._version import __version__
 from .estimator import HierarchicalHMMGMRRegressor, HMMGMRRegressor
@@ -35,6 +34,7 @@ __all__ = [
     "ForwardFeatureSelector",
     "HMMGMRRegressor",
     "HierarchicalHMMGMRRegressor",
+    "InconsistentVersionWarning",
     "PerformanceScore",
     "SelectionReport",
     "SmoothnessScore",
@@ -55,6 +55,3 @@ __all__ = [
     "state_selection",
     "utils",
 ]
-
-publish(globals())
-_legacy.install()

@@ -1,15 +1,19 @@
 """Portable model file: any fitted model of the package as plain JSON, readable without it.
 
+The model file is the package's long-lived format: later releases of skhmmgmr read every
+format version and predict from it bit for bit, and any language reads it without the package.
 :func:`save` writes a fitted :class:`~skhmmgmr.HMMGMRRegressor` or
 :class:`~skhmmgmr.HierarchicalHMMGMRRegressor`, or a fitted pipeline of
 :class:`~skhmmgmr.SteeringFeatures` steps followed by one of them (the
 :class:`~skhmmgmr.torque_pipeline.TorquePipeline` of :func:`~skhmmgmr.make_torque_pipeline`,
 or a scikit-learn :class:`~sklearn.pipeline.Pipeline` of the same steps); :func:`load` reads it
-back, predicting bit for bit as the saved object. The regressor's
-:meth:`~skhmmgmr.HMMGMRRegressor.export_json` and
-:meth:`~skhmmgmr.HMMGMRRegressor.from_json` are the regressor's shortcuts for the same files.
-A file is read as data, never run; :func:`json_schema` returns the JSON Schema (draft 2020-12)
-of the format, shipped with the package (``skhmmgmr/portable_schema.json``).
+back, predicting bit for bit as the saved object. They are the one way to save and load a
+model; the older shortcuts (the estimators' ``export_json``, ``from_json``, ``to_dict`` and
+``from_dict``, and this module's ``to_dict``, ``export_json``, ``load_json`` and
+``read_model``) are deprecated aliases, removed in 0.3. A file is read as data, never run;
+:func:`json_schema` returns the JSON Schema (draft 2020-12) of the format, shipped with the
+package (``skhmmgmr/portable_schema.json``), against which :func:`load` checks every file and
+:func:`save` every file it writes.
 
 The file is one JSON object. Its header, for every kind of model:
 
@@ -110,23 +114,26 @@ value ``c`` in the recording is ``g`` samples old (``0 < g <= max(lags)``) is ob
 ``P_mm + diag(1 / v)`` in the formulas above, ``z_m = mu_m + (P_mm + diag(1/v))^-1 (diag(1/v)
 (c - mu_m) - P_mo (z_o - mu_o))``, and ``b_k`` gains the density of ``c`` given ``z_o``.
 
-Reading refuses, with a message naming the key (and the file): a missing key, a value of the
-wrong kind or shape, a format version that is not a whole number from 1 to
-:data:`FORMAT_VERSION`, an unknown ``model_type`` or step ``type``, inconsistent parts (a
+Reading refuses, with a message naming the key (and the file): a format version that is not
+a whole number from 1 to :data:`FORMAT_VERSION`, an unknown ``model_type``, then anything the
+JSON Schema refuses (a missing or unknown key, a value of the wrong kind, a key of a newer
+format version, such as ``output_decay`` in a block of version 2), a number that is not finite
+(``1e400``), then what the schema cannot say: sizes across keys, inconsistent parts (a
 ``filter`` block that does not match ``joint``, a step whose outputs are not the next step's
 inputs) and parameters the estimators refuse.
 """
 
-import json
 import math
 import numbers
-from importlib.resources import files
+import os
+from numbers import Real
 
 from sklearn.pipeline import Pipeline
 from sklearn.utils.validation import check_is_fitted
 
-from ._core._compat import InvalidParameterError
-from ._core._public import publish
+from ._core._compat import FiniteInterval, InvalidParameterError, validate_params
+from ._core._deprecation import deprecated_alias
+from ._hmm import _portable
 from ._hmm._portable import (
     FIT_INFO_KEYS,
     FORMAT_NAME,
@@ -135,12 +142,12 @@ from ._hmm._portable import (
     REGRESSOR_TYPE,
     REGRESSOR_TYPES,
     PortableModel,
-    export_json,
-    load_json,
+    check_model_file,
+    estimator_from_dict,
+    estimator_to_dict,
+    model_file_schema,
     read_header,
-    read_model,
     read_training,
-    to_dict,
 )
 from ._version import __version__
 from .estimator import HierarchicalHMMGMRRegressor, HMMGMRRegressor
@@ -177,11 +184,23 @@ STEERING_PARAMS = (
     "velocity_filter",
     "sampling_period",
 )
-SCHEMA_FILE = "portable_schema.json"
 
 
+@validate_params(
+    {
+        "fitted": "no_validation",  # refused below, naming the type or the step
+        "path": [str, os.PathLike],
+        "output_names": ["array-like", None],
+        "units": [dict, None],
+        "sampling_period": [FiniteInterval(Real, 0, None, closed="neither"), None],
+    },
+    prefer_skip_nested_validation=True,
+)
 def save(fitted, path, *, output_names=None, units=None, sampling_period=None):
     """Write a fitted regressor or torque pipeline to one portable JSON file.
+
+    The model file is the format meant to last: later releases of skhmmgmr read it and predict
+    from it bit for bit (a pickle is for the same release only).
 
     Parameters
     ----------
@@ -191,9 +210,12 @@ def save(fitted, path, *, output_names=None, units=None, sampling_period=None):
         makes) or :class:`~skhmmgmr.HierarchicalHMMGMRRegressor`; anything else (subclasses
         included) is refused, naming the step or the type.
     path : str or path-like
-        The file to write (strict JSON, UTF-8).
+        The file to write (strict JSON, UTF-8), replaced if it exists; it is written
+        completely or not at all.
     output_names : list of str, default=None
-        Names of the outputs; ``output_0``, ... when None.
+        Distinct names of the outputs; None: those of ``y`` in ``fit`` (the regressor's
+        ``output_names_``: a pandas Series' name, a DataFrame's columns), else ``output_0``,
+        ...
     units : dict, default=None
         Unit text of inputs (the columns the model takes) or outputs, by name, stored in
         ``training.units``.
@@ -207,8 +229,9 @@ def save(fitted, path, *, output_names=None, units=None, sampling_period=None):
     TypeError
         If ``fitted`` is not one of the models above; the message names the type or step.
     ValueError
-        If a ``units`` name is not an input or output of the model, or a fitted value is not
-        finite.
+        If the file would not be a valid model file (the same checks as :func:`load`'s, such
+        as repeated ``output_names``), if a ``units`` name is not an input or output of the
+        model, or a fitted value is not finite.
 
     See Also
     --------
@@ -224,17 +247,27 @@ def save(fitted, path, *, output_names=None, units=None, sampling_period=None):
     >>> X, y = data[list(FEATURE_NAMES)], data["driver_torque"]
     >>> pipe = make_torque_pipeline(2, random_state=0).fit(X, y)
     >>> path = os.path.join(tempfile.mkdtemp(), "torque.json")
-    >>> portable.save(pipe, path, output_names=["driver_torque"])
-    >>> bool(np.array_equal(portable.load(path).predict(X), pipe.predict(X)))
+    >>> portable.save(pipe, path, units={"driver_torque": "N m"})
+    >>> loaded, training = portable.load(path, return_training=True)
+    >>> bool(np.array_equal(loaded.predict(X), pipe.predict(X)))
     True
+    >>> training["units"]
+    {'driver_torque': 'N m'}
     """
-    export_json(
-        _model_dict(fitted, output_names=output_names, units=units, period=sampling_period), path
-    )
+    data = _model_dict(fitted, output_names=output_names, units=units, period=sampling_period)
+    try:
+        check_model_file(data)
+    except ValueError as exc:
+        raise ValueError(f"cannot save the model: {exc}") from None
+    _portable.export_json(data, path)
 
 
+@validate_params(
+    {"path": [str, os.PathLike], "return_training": ["boolean"]},
+    prefer_skip_nested_validation=True,
+)
 def load(path, *, return_training=False):
-    """Read a portable model file written by :func:`save`, ``export_json`` or skhmmgmr 0.1.0.
+    """Read a model file written by :func:`save` (or by skhmmgmr 0.1.0 and later).
 
     Parameters
     ----------
@@ -271,7 +304,7 @@ def load(path, *, return_training=False):
     >>> training
     {}
     """
-    data = load_json(path)
+    data = _portable.load_json(path)
     try:
         model, training = _model_from_dict(data)
     except ValueError as exc:
@@ -286,9 +319,9 @@ def json_schema():
     -------
     schema : dict
         The schema shipped with the package (``skhmmgmr/portable_schema.json``): validate a
-        file with any JSON Schema validator. It checks the keys, their kinds and the
-        structure; the equal sizes of arrays across keys and the numerical checks are
-        :func:`load`'s.
+        file with any JSON Schema validator; :func:`load` checks every file against it. It
+        checks the keys, their kinds and the structure; the equal sizes of arrays across
+        keys and the numerical checks are :func:`load`'s.
 
     Examples
     --------
@@ -296,7 +329,94 @@ def json_schema():
     >>> portable.json_schema()["$schema"]
     'https://json-schema.org/draft/2020-12/schema'
     """
-    return json.loads((files(__package__) / SCHEMA_FILE).read_text(encoding="utf-8"))
+    return model_file_schema()
+
+
+# --------------------------------------------------------------------------------------------
+# Deprecated aliases (removed in 0.3)
+# --------------------------------------------------------------------------------------------
+
+_ESTIMATOR = "HMMGMRRegressor.from_fitted_model(model, **params)"
+
+
+@deprecated_alias(
+    "skhmmgmr.portable.to_dict",
+    f"write the model file with skhmmgmr.portable.save({_ESTIMATOR}, path)",
+)
+def to_dict(model, **kwargs):
+    """The model file's dict of a :class:`~skhmmgmr.FittedHMMGMR`.
+
+    .. deprecated:: 0.2
+       ``to_dict`` will be removed in 0.3: write the file with
+       ``save(HMMGMRRegressor.from_fitted_model(model, **params), path)``.
+
+    Parameters
+    ----------
+    model : FittedHMMGMR
+    **kwargs : dict
+        ``estimator_params``, ``fit_info``, ``output_names``, ``training`` and
+        ``model_type``, stored as given.
+
+    Returns
+    -------
+    data : dict
+    """
+    return _portable.to_dict(model, **kwargs)
+
+
+@deprecated_alias("skhmmgmr.portable.export_json", "write model files with skhmmgmr.portable.save")
+def export_json(data, path):
+    """Write a model file's dict to ``path`` as strict JSON.
+
+    .. deprecated:: 0.2
+       ``export_json`` will be removed in 0.3: write model files with :func:`save`.
+
+    Parameters
+    ----------
+    data : dict
+    path : str or path-like
+    """
+    _portable.export_json(data, path)
+
+
+@deprecated_alias("skhmmgmr.portable.load_json", "read model files with skhmmgmr.portable.load")
+def load_json(path):
+    """Read a model file into a dict, refusing invalid JSON and NaN tokens.
+
+    .. deprecated:: 0.2
+       ``load_json`` will be removed in 0.3: read model files with :func:`load`.
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    data : dict
+    """
+    return _portable.load_json(path)
+
+
+@deprecated_alias(
+    "skhmmgmr.portable.read_model",
+    "read model files with skhmmgmr.portable.load (its model_ is the FittedHMMGMR)",
+)
+def read_model(data):
+    """The :class:`PortableModel` of a regressor's model file dict, checked.
+
+    .. deprecated:: 0.2
+       ``read_model`` will be removed in 0.3: :func:`load` reads the file (the regressor's
+       ``model_``, ``get_params()`` and fitted attributes are what this returns).
+
+    Parameters
+    ----------
+    data : dict
+
+    Returns
+    -------
+    portable : PortableModel
+    """
+    return _portable.read_model(data)
 
 
 # --------------------------------------------------------------------------------------------
@@ -316,7 +436,7 @@ def _is_regressor(value):
 
 def _model_dict(fitted, *, output_names, units, period):
     if _is_regressor(fitted):
-        data = fitted.to_dict(output_names=output_names)
+        data = estimator_to_dict(fitted, output_names=output_names)
         names = [*data["feature_names"], *data["output_names"]]
         data["training"] = _training(data["training"], units, period, names)
         return data
@@ -343,7 +463,7 @@ def _model_dict(fitted, *, output_names, units, period):
             f"the pipeline's last step {last_name!r} is {_type_name(regressor)}, not an "
             "HMMGMRRegressor or a HierarchicalHMMGMRRegressor"
         )
-    model = regressor.to_dict(output_names=output_names)
+    model = estimator_to_dict(regressor, output_names=output_names)
     steps.append({"name": str(last_name), "type": model["model_type"], "model": model})
     if period is None:
         periods = [step.sampling_period for _, step in transformers]
@@ -415,45 +535,40 @@ def _steering_dict(name, step):
 # --------------------------------------------------------------------------------------------
 
 
-def _require(block, key, where):
-    if key not in block:
-        raise ValueError(f"the model file lacks the key '{where}{key}'")
-    return block[key]
-
-
 def _model_from_dict(data):
     """(fitted model, training facts) of a model file's dict."""
     if not isinstance(data, dict):
         raise ValueError(f"a model file must be a JSON object, got {type(data).__name__}")
     version = read_header(data)
-    model_type = REGRESSOR_TYPE if version == 1 else _require(data, "model_type", "")
+    if version == 1:
+        model_type = REGRESSOR_TYPE
+    elif "model_type" not in data:
+        raise ValueError("the model file lacks the key 'model_type'")
+    else:
+        model_type = data["model_type"]
     if model_type not in MODEL_TYPES:
         raise ValueError(
             f"'model_type' is {model_type!r:.100}; this version of skhmmgmr reads "
             f"{sorted(MODEL_TYPES)}"
         )
+    check_model_file(data)
     if model_type in REGRESSOR_TYPES:
-        model = MODEL_TYPES[model_type].from_dict(data)
+        model = estimator_from_dict(MODEL_TYPES[model_type], data, checked=True)
         names = [*data["feature_names"], *data["output_names"]]
         return model, read_training(data.get("training"), names)
     return _pipeline_from_dict(data, MODEL_TYPES[model_type])
 
 
 def _pipeline_from_dict(data, cls):
-    blocks = _require(data, "steps", "")
-    if not isinstance(blocks, list) or not blocks:
-        raise ValueError("'steps' must be a non-empty list of steps")
+    """The pipeline of a file that follows the schema: its steps in order (SteeringFeatures
+    steps, then the regressor's), each fitting the next."""
+    blocks = data["steps"]
     steps, previous = [], None
     for index, block in enumerate(blocks):
         where = f"steps[{index}]"
-        if not isinstance(block, dict):
-            raise ValueError(f"'{where}' must be a JSON object")
-        name = _require(block, "name", f"{where}.")
-        if not isinstance(name, str) or not name or "__" in name:
-            raise ValueError(f"'{where}.name' must be a step name (text without '__')")
+        name, kind = block["name"], block["type"]
         if name in {n for n, _ in steps}:
             raise ValueError(f"'{where}.name' {name!r} names two steps")
-        kind = _require(block, "type", f"{where}.")
         last = index == len(blocks) - 1
         expected = REGRESSOR_TYPES if last else (STEERING_TYPE,)
         if kind not in expected:
@@ -463,7 +578,7 @@ def _pipeline_from_dict(data, cls):
                 f"pipeline's steps are {known}"
             )
         if last:
-            step = _regressor_step(_require(block, "model", f"{where}."), where, kind)
+            step = _regressor_step(block["model"], where, kind)
         else:
             step = _steering_step(block, where)
         if previous is not None:
@@ -484,36 +599,18 @@ def _pipeline_from_dict(data, cls):
 
 def _regressor_step(model, where, kind):
     try:
-        return MODEL_TYPES[kind].from_dict(model)
+        return estimator_from_dict(MODEL_TYPES[kind], model, checked=True)
     except ValueError as exc:
         raise ValueError(f"in '{where}.model': {exc}") from exc
 
 
 def _steering_step(block, where):
-    params = _require(block, "params", f"{where}.")
-    if not isinstance(params, dict):
-        raise ValueError(f"'{where}.params' must be a JSON object")
-    unknown = sorted(set(params) - set(STEERING_PARAMS))
-    if unknown:
-        raise ValueError(f"'{where}.params' holds the unknown parameter(s) {unknown}")
-    for key in STEERING_PARAMS:
-        _require(params, key, f"{where}.params.")
     values = {
-        key: tuple(value) if isinstance(value, list) else value for key, value in params.items()
+        key: tuple(value) if isinstance(value, list) else value
+        for key, value in block["params"].items()
     }
-    n_features = _require(block, "n_features_in", f"{where}.")
-    if isinstance(n_features, bool) or not isinstance(n_features, int) or n_features < 1:
-        raise ValueError(f"'{where}.n_features_in' must be a positive integer")
-    names = _require(block, "feature_names_in", f"{where}.")
-    if names is not None and (
-        not isinstance(names, list)
-        or len(names) != n_features
-        or not all(isinstance(n, str) for n in names)
-        or len(set(names)) != len(names)
-    ):
-        raise ValueError(f"'{where}.feature_names_in' must be null or {n_features} distinct names")
     try:
-        return restore_steering_features(values, n_features, names)
+        return restore_steering_features(values, block["n_features_in"], block["feature_names_in"])
     except (InvalidParameterError, TypeError, ValueError) as exc:
         raise ValueError(f"'{where}' holds a SteeringFeatures that fit refuses: {exc}") from exc
 
@@ -533,6 +630,3 @@ def _check_chain(previous, step, where):
         raise ValueError(
             f"'{where}' takes the inputs {list(names)}, but the step before it gives {out}"
         )
-
-
-publish(globals())

@@ -50,6 +50,7 @@ from ._core._compat import (
 )
 from ._core._docstrings import fill_shared_parameters
 from ._core._panel import align_target, has_recording_index, read_layout
+from ._core._pickled import PickleVersionMixin
 from .estimator import HMMGMRRegressor
 from .streaming import FilterStream
 from .streaming._derived import check_time_steps
@@ -108,7 +109,7 @@ def low_pass(values, decay):
 
 
 @fill_shared_parameters
-class SteeringFeatures(TransformerMixin, BaseEstimator):
+class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     """Append the friction and load-compression inputs of a power-assisted steering system.
 
     Only the ``"auto"`` settings are learned: ``fit`` chooses the friction band and the
@@ -714,7 +715,7 @@ def _needs_recordings(step):
     return step.velocity_filter != AUTO or step.sampling_period is not None
 
 
-class TorquePipeline(Pipeline):
+class TorquePipeline(PickleVersionMixin, Pipeline):
     """The :class:`~sklearn.pipeline.Pipeline` of :func:`make_torque_pipeline`: recordings
     given once reach every step that reads them.
 

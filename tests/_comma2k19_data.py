@@ -7,7 +7,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from skhmmgmr.datasets._comma2k19_sample import SAMPLE_NAME, SAMPLE_ROUTE, extract_sample
+from skhmmgmr.datasets._comma2k19._sample import SAMPLE_NAME, SAMPLE_ROUTE, extract_sample
 
 ROUTE = SAMPLE_ROUTE
 SEGMENT_NAME = SAMPLE_NAME

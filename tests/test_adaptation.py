@@ -1,12 +1,12 @@
 """MAP adaptation (``adapt``), forecasts ahead (``predict_ahead``) and ``shift_target``."""
 
-import json
 import pickle
 
 import numpy as np
 import pandas as pd
 import pytest
 from scipy.stats import multivariate_normal
+from test_portable import file_dict, load_dict
 
 from skhmmgmr import HMMGMRRegressor
 from skhmmgmr._core._sequences import as_recordings
@@ -97,10 +97,10 @@ def test_with_many_rows_adaptation_approaches_plain_em_from_the_fitted_model(fit
     assert gaps[1] < 1e-2
 
 
-def test_adapted_models_round_trip_through_json_and_pickle(fitted):
+def test_adapted_models_round_trip_through_json_and_pickle(fitted, tmp_path):
     X, y = _data(300, 6, offset=0.5)
     model = _copy(fitted).adapt(X, y, parameters="mvt", n_iter=2)
-    restored = HMMGMRRegressor.from_dict(json.loads(json.dumps(model.to_dict())))
+    restored = load_dict(file_dict(model, tmp_path), tmp_path)
     assert np.array_equal(restored.predict(X), model.predict(X))
     assert np.array_equal(_copy(model).predict(X), model.predict(X))
 

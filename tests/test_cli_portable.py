@@ -108,7 +108,7 @@ def test_fit_and_predict_of_the_regressor_keep_working(files, capsys):
     argv.insert(1, str(files["csv"]))
     assert main(["--quiet", *argv]) == 0
     assert type(portable.load(model)) is HMMGMRRegressor
-    assert HMMGMRRegressor.from_json(model).longest_recording_ == 300
+    assert portable.load(model).longest_recording_ == 300
     # data without the target column: predictions, no metrics
     path = files["folder"] / "no_target.csv"
     files["data"].drop(columns=TARGET).to_csv(path, index=False)

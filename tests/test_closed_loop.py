@@ -8,20 +8,29 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from sklearn.linear_model import Ridge
 
-from skhmmgmr import HMMGMRRegressor
+from skhmmgmr import HMMGMRRegressor, make_torque_pipeline
 from skhmmgmr.datasets import (
     FEATURE_NAMES,
     PREVIEW_FEATURES,
     drive,
     make_driving_protocol,
     make_lane_keeping,
+    to_panel,
+    torque_ahead,
 )
-from skhmmgmr.datasets._sensors import draw_errors, measure
-from skhmmgmr.datasets._simulator import Section, _features
+from skhmmgmr.datasets._simulator._closed_loop import LOG_COLUMNS
+from skhmmgmr.datasets._simulator._section import Section, SectionSpec
+from skhmmgmr.datasets._simulator._sensors import draw_errors, measure
 from skhmmgmr.metrics import LANE_KEEPING_METRICS, lane_keeping_metrics
 
 FEATURES = list(FEATURE_NAMES)
 SEEDS = dict(random_state=5, road_random_state=7)
+
+
+def defensive_section(duration, rate, seeds=(5, 7)):
+    """The section a defensive human drives with the seeds of ``drive(**SEEDS)`` (or others)."""
+    spec = SectionSpec(duration, 7, 100.0, rate, "highway", *seeds, None, None)
+    return Section(spec, "defensive")
 
 
 def _replay(torques):
@@ -56,10 +65,12 @@ def test_the_closed_loop_logs_what_a_plain_run_with_the_same_torques_logs(sensor
     duration, rate = 8.0, 50.0
     rng = np.random.default_rng(3)
     torques = np.cumsum(rng.normal(0.0, 0.05, int(duration * rate)))
-    section = Section(duration, 7, "defensive", 100.0, rate, "highway", 5, 7)
+    section = Section(
+        SectionSpec(duration, 7, 100.0, rate, "highway", 5, 7, None, None), "defensive"
+    )
     log = section.simulate(lambda row, states: torques[row])
-    assert_array_equal(log[:, 13], torques)
-    clean, torque = _features(log, section.road, section.vehicle, section.speed)
+    assert_array_equal(log[:, LOG_COLUMNS.index("torque")], torques)
+    clean, torque = section.features(log)
     scale = None if sensor_noise is None else 1.0
     expected, expected_torque = measure(
         clean, torque, 1.0 / rate, section.speed, scale, section.rng
@@ -87,7 +98,7 @@ def test_every_driver_gets_the_same_sensor_errors():
 
     a, b = errors(np.zeros(300)), errors(np.full(300, 0.3))
     assert_allclose(a, b, rtol=0, atol=1e-12)
-    section = Section(6.0, 7, "defensive", 100.0, 50.0, "highway", 5, 7)
+    section = defensive_section(6.0, 50.0)
     drawn = draw_errors(300, 0.02, 1.0, section.rng)
     assert_allclose(a[:, 0], sum(drawn["lateral_acceleration"]), rtol=0, atol=1e-12)
 
@@ -143,9 +154,15 @@ def test_the_row_a_callable_gets_is_the_sensed_features_and_read_only():
     "driver, error, message",
     [
         ("racer", ValueError, "Unknown driver style"),
-        (42, TypeError, "style name, a fitted model or a callable"),
+        (42, TypeError, "style name, a fitted model, an FMU .* or a callable"),
         (lambda row: float("nan"), ValueError, "non-finite torque"),
         (lambda row: [1.0, 2.0], ValueError, "returned 2 values"),
+        # a raw float() error before, naming neither the driver nor the time
+        (lambda row: "abc", ValueError, r"driver <lambda> returned 'abc' at 0.000 s; a torque"),
+        (lambda row: 1 + 2j, ValueError, r"driver <lambda> returned \(1\+2j\) at 0.000 s"),
+        (lambda row: np.array([0.5j]), ValueError, "a torque is a real number"),
+        (lambda row: True, ValueError, "returned True at 0.000 s"),
+        (lambda row: [1.0, [2.0]], ValueError, "a torque is a real number"),
     ],
 )
 def test_bad_drivers_are_refused_naming_the_problem(driver, error, message):
@@ -232,7 +249,7 @@ def test_lane_keeping_metrics_refuse_bad_input():
         lane_keeping_metrics(frame, vehicle_width=3.5)
     with pytest.raises(ValueError, match="needs the time|no 'time'"):
         lane_keeping_metrics(frame.drop(columns="time"))
-    with pytest.raises(TypeError, match="pandas DataFrame"):
+    with pytest.raises(TypeError, match="'frame' parameter .* 'pandas.DataFrame'"):
         lane_keeping_metrics(frame.to_numpy())
 
 
@@ -258,14 +275,14 @@ def test_the_wide_lane_scenario_is_one_5_m_lane_of_straights_and_sinusoids():
 
 
 def test_manoeuvre_labels_and_crossing_times_of_a_hand_made_drive():
-    section = Section(2.0, 7, "defensive", 100.0, 10.0, "highway", 0, None)
+    section = defensive_section(2.0, 10.0, seeds=(0, None))
     section.road.manoeuvres = [(100.0, 160.0, "lane_change_left"), (200.0, 230.0, "evasive")]
     s = np.arange(0.0, 300.0, 10.0)
     lateral = np.zeros_like(s)
     lateral[(s >= 100) & (s < 160)] = [0.5, 1.0, 1.7, 1.8, 3.0, 3.4]  # crosses 1.75 at s=130
     lateral[(s >= 200) & (s < 230)] = [-1.0, -1.5, -1.7]  # never crosses
-    log = np.zeros((len(s), 14))
-    log[:, 10], log[:, 11] = s, lateral
+    log = np.zeros((len(s), len(LOG_COLUMNS)))
+    log[:, LOG_COLUMNS.index("s")], log[:, LOG_COLUMNS.index("e_y")] = s, lateral
     labels, crossing = section.manoeuvres(log)
     assert list(labels[9:17]) == ["lane_keeping"] + ["lane_change_left"] * 6 + ["lane_keeping"]
     assert list(labels[20:23]) == ["evasive"] * 3
@@ -287,3 +304,29 @@ def test_every_lane_change_of_the_human_crosses_the_marking_during_the_manoeuvre
         # the car's centre crosses there; the front axle, ahead on a heading, a little earlier
         at = frame.loc[np.isclose(frame["time"], crossing), "lateral_deviation_0m"].iloc[0]
         assert abs(abs(at) - 1.75) < 0.3
+
+
+def test_a_pipeline_fitted_at_another_rate_is_refused_as_predict_refuses_it():
+    # drive ran a pipeline fitted at 20 Hz (velocity filter 0.1 s) at 100 Hz without a word
+    human = make_lane_keeping(20.0, sampling_rate=20.0, random_state=0)
+    columns = ["steering_wheel_angle", "steering_wheel_velocity", "lateral_acceleration"]
+    pipe = make_torque_pipeline(
+        2, velocity_filter=0.1, sampling_period=0.05, output_smoothing=None, random_state=0
+    ).fit(human[columns], human["driver_torque"])
+    fast = make_lane_keeping(2.0, sampling_rate=100.0, random_state=1)
+    with pytest.raises(ValueError) as predicted:
+        pipe.predict(to_panel(fast)[columns])
+    same_words = "but sampling_period=0.05: the velocity filter would run 5 times too fast or slow"
+    assert same_words in str(predicted.value)
+    for simulate, extra in ((drive, {}), (torque_ahead, {"horizons": (0.1,)})):
+        with pytest.raises(ValueError) as refused:
+            simulate(pipe, duration=2.0, sampling_rate=100.0, random_state=1, **extra)
+        message = str(refused.value)
+        assert same_words in message
+        assert "sampling_rate=100" in message and "sampling_rate=20" in message
+        assert "'steering_features' of TorquePipeline" in message
+    # at its own rate it drives, and so does a pipeline without a velocity filter
+    assert len(drive(pipe, duration=2.0, sampling_rate=20.0, random_state=1)) == 40
+    unfiltered = make_torque_pipeline(2, velocity_filter=None, output_smoothing=None)
+    unfiltered.fit(human[columns], human["driver_torque"])
+    assert len(drive(unfiltered, duration=1.0, sampling_rate=100.0, random_state=1)) == 100

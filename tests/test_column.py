@@ -15,7 +15,7 @@ from skhmmgmr.datasets import (
     drive,
     make_lane_keeping,
 )
-from skhmmgmr.datasets._simulator import INTERNAL_RATE
+from skhmmgmr.datasets._simulator._section import INTERNAL_RATE
 
 # The stiffest corner of the ranges: the stiffest torsion bar on the lightest wheel, with the
 # strongest assist (which multiplies the bar's stiffness at the lower column), the narrowest

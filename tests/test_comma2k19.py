@@ -7,7 +7,7 @@ import pytest
 from _comma2k19_data import SEGMENT, SEGMENT_NAME
 
 from skhmmgmr.datasets import FEATURE_UNITS, TARGET, load_comma2k19_segment
-from skhmmgmr.datasets._comma2k19_can import decode_big_endian_signal
+from skhmmgmr.datasets._comma2k19._can import decode_big_endian_signal
 
 WHEELBASE = 2.65
 STEERING_RATIO = 16.88

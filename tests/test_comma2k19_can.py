@@ -10,9 +10,9 @@ import pandas as pd
 import pytest
 from _comma2k19_data import SEGMENT, SEGMENT_NAME
 
-from skhmmgmr.datasets import _comma2k19_can as can
 from skhmmgmr.datasets import fetch_comma2k19, load_comma2k19_segment
-from skhmmgmr.datasets._comma2k19 import ENGAGEMENT
+from skhmmgmr.datasets._comma2k19 import _can as can
+from skhmmgmr.datasets._comma2k19._segment import ENGAGEMENT
 
 RAW_CAN = Path("processed_log", "CAN", "raw_can")
 

@@ -12,7 +12,7 @@ import pytest
 from _comma2k19_data import SEGMENT, SEGMENT_NAME
 
 from skhmmgmr.datasets import TARGET, load_comma2k19_sample, load_comma2k19_segment
-from skhmmgmr.datasets._comma2k19_sample import (
+from skhmmgmr.datasets._comma2k19._sample import (
     KEPT_FILES,
     KEPT_FRAMES,
     reduce_segment,

@@ -5,12 +5,12 @@ import pandas as pd
 import pytest
 
 from skhmmgmr.datasets import (
-    _simulator,
     load_comma2k19_segment,
     load_recordings,
     make_lane_keeping,
 )
 from skhmmgmr.datasets._frame import concat_frames, tidy_frame
+from skhmmgmr.datasets._simulator import _lane_keeping
 
 # --- the builder on hand-made columns ---------------------------------------------------------
 
@@ -175,14 +175,14 @@ def _nan_message(column, recording, where, count):
 
 
 def test_simulator_goes_through_the_builder(monkeypatch):
-    measure = _simulator.measure
+    measure = _lane_keeping.measure
 
     def corrupted(*args):
         features, torque = measure(*args)
         features["yaw_rate"][3] = np.nan
         return features, torque
 
-    monkeypatch.setattr(_simulator, "measure", corrupted)
+    monkeypatch.setattr(_lane_keeping, "measure", corrupted)
     with pytest.raises(ValueError) as excinfo:
         make_lane_keeping(0.1, recording="r", random_state=0)
     assert _message(excinfo) == _nan_message("yaw_rate", "r", "row 3, time 0.03", 1)

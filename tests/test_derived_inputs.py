@@ -208,7 +208,7 @@ def test_the_model_file_holds_the_chosen_values(pipeline, data, tmp_path):
     document = json.loads(path.read_text())
     document["steps"][0]["params"]["velocity_filter"] = "auto"
     path.write_text(json.dumps(document))
-    with pytest.raises(ValueError, match="velocity_filter='auto' is a setting to fit"):
+    with pytest.raises(ValueError, match="'steps.0..params.velocity_filter' must be a number or"):
         portable.load(path)
 
 

@@ -46,13 +46,13 @@ def test_every_module_of_the_package_is_on_the_architecture_page():
 
 def test_the_sections_are_the_subpackages_in_the_order_of_the_layers():
     entries = [entry for entry, _ in sections()]
-    # _version and _legacy are on the ground floor and said in _core's section
-    assert set(entries) == set(RANK) - {"_version", "_legacy", "__main__"}
+    # _version and legacy are on the ground floor and said in _core's section
+    assert set(entries) == set(RANK) - {"_version", "legacy", "__main__"}
     ranks = [RANK[entry] for entry in entries]
     assert ranks == sorted(ranks), f"sections out of the layers' order: {entries}"
     for entry, text in sections():
         for module in MODULE.findall(text):
-            if _entry_of(module) not in {"_version", "_legacy", "__main__"}:
+            if _entry_of(module) not in {"_version", "legacy", "__main__"}:
                 assert _entry_of(module) == entry, f"{module} is named in the {entry} section"
 
 

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 from scipy.special import logsumexp
 from scipy.stats import multivariate_normal
+from test_portable import file_dict, load_dict
 
-from skhmmgmr import FittedHMMGMR, HMMGMRRegressor
+from skhmmgmr import FittedHMMGMR, HMMGMRRegressor, portable
 from skhmmgmr._core._sequences import as_recordings
 from skhmmgmr._hmm._em import HMMParameters, baum_welch
 from skhmmgmr._hmm._emissions import (
@@ -289,16 +290,16 @@ def test_fit_filter_stream_and_json_agree_for_both_families(data, fitted, tmp_pa
     streamed = fitted.filter_stream().update_batch(X[first])
     np.testing.assert_allclose(streamed, predicted[first], rtol=0, atol=1e-12)
     path = tmp_path / "model.json"
-    fitted.export_json(path)
+    portable.save(fitted, path)
     assert json.loads(path.read_text())["joint"]["covariance_type"] == fitted.covariance_type
-    restored = HMMGMRRegressor.from_json(path)
+    restored = portable.load(path)
     assert restored.covariance_type == fitted.covariance_type
     np.testing.assert_array_equal(restored.predict(X, groups=groups), predicted)
     if fitted.covariance_type == "tied":
         np.testing.assert_allclose(fitted.covars_, np.broadcast_to(fitted.covars_[0], (3, 3, 3)))
 
 
-def test_adapted_models_of_both_families_export_and_stream_exactly(data, fitted):
+def test_adapted_models_of_both_families_export_and_stream_exactly(data, fitted, tmp_path):
     """Adaptation (means, covariances, transitions, batch and online) keeps the family, and
     the adapted models go through JSON and hmmlearn and back bit for bit."""
     from skhmmgmr._hmm._hmmlearn import from_hmmlearn
@@ -310,7 +311,7 @@ def test_adapted_models_of_both_families_export_and_stream_exactly(data, fitted)
     assert adapted.covariance_type == fitted.covariance_type
     assert not np.allclose(adapted.covars_, fitted.covars_)
     predicted = adapted.predict(X, groups=groups)
-    restored = HMMGMRRegressor.from_dict(json.loads(json.dumps(adapted.to_dict())))
+    restored = load_dict(file_dict(adapted, tmp_path), tmp_path)
     np.testing.assert_array_equal(restored.predict(X, groups=groups), predicted)
     np.testing.assert_array_equal(restored.covars_, adapted.covars_)
     back = from_hmmlearn(adapted.to_hmmlearn())
@@ -327,13 +328,13 @@ def test_adapted_models_of_both_families_export_and_stream_exactly(data, fitted)
     assert not np.allclose(online.emissions.means, fitted.model_.emissions.means)
 
 
-def test_a_tied_file_with_unequal_covariances_is_refused(data):
+def test_a_tied_file_with_unequal_covariances_is_refused(data, tmp_path):
     X, y, groups = data
     model = HMMGMRRegressor(n_states=2, covariance_type="tied", random_state=0)
-    data_dict = model.fit(X, y, groups=groups).to_dict()
+    data_dict = file_dict(model.fit(X, y, groups=groups), tmp_path)
     data_dict["joint"]["covariances"][1][0][0] *= 2.0
     with pytest.raises(ValueError, match="must all be equal"):
-        HMMGMRRegressor.from_dict(data_dict)
+        load_dict(data_dict, tmp_path)
 
 
 def test_fitted_model_is_immutable(fitted):

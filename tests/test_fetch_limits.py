@@ -18,7 +18,8 @@ import pytest
 from _comma2k19_data import ROUTE, SEGMENT
 from _http_server import Server
 
-from skhmmgmr.datasets import _download, _fetch, fetch_comma2k19, load_comma2k19_segment
+from skhmmgmr.datasets import _download, fetch_comma2k19, load_comma2k19_segment
+from skhmmgmr.datasets._comma2k19 import _fetch
 from skhmmgmr.datasets._remote import read_manifest
 
 pytest.importorskip("fsspec")

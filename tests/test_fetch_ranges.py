@@ -20,8 +20,9 @@ import pytest
 from _comma2k19_data import ROUTE, SEGMENT
 from _http_server import Server
 
-from skhmmgmr.datasets import _fetch, fetch_comma2k19, load_comma2k19_segment, scan_comma2k19
 from skhmmgmr.datasets import _remote as remote
+from skhmmgmr.datasets import fetch_comma2k19, load_comma2k19_segment, scan_comma2k19
+from skhmmgmr.datasets._comma2k19 import _fetch
 from skhmmgmr.datasets._download import file_url
 from skhmmgmr.datasets._remote import hub_sha256
 

@@ -7,8 +7,9 @@ import pytest
 from scipy.stats import multivariate_normal
 from sklearn import config_context
 from sklearn.model_selection import GroupKFold, cross_validate
+from test_portable import file_dict, load_dict
 
-from skhmmgmr import HierarchicalHMMGMRRegressor
+from skhmmgmr import HierarchicalHMMGMRRegressor, portable
 from skhmmgmr.export import write_c
 
 
@@ -214,8 +215,9 @@ def test_model_file_stream_and_c_export_reproduce_predict(fitted, tmp_path):
     model, X, _, _, groups = fitted
     rows = X[groups == 1]
     path = tmp_path / "hierarchy.json"
-    model.export_json(path)
-    restored = HierarchicalHMMGMRRegressor.from_json(path)
+    portable.save(model, path)
+    restored = portable.load(path)
+    assert type(restored) is HierarchicalHMMGMRRegressor
     np.testing.assert_allclose(restored.predict(rows), model.predict(rows), rtol=0, atol=1e-12)
     np.testing.assert_allclose(
         restored.predict_manoeuvre_proba(rows), model.predict_manoeuvre_proba(rows), atol=1e-12
@@ -335,12 +337,12 @@ def test_manoeuvres_given_as_a_dict_or_a_set_is_refused_naming_it(manoeuvres):
         model.fit(X, y, groups=groups, manoeuvre=labels)
 
 
-def test_a_model_file_with_manoeuvres_as_a_dict_names_the_key(fitted):
+def test_a_model_file_with_manoeuvres_as_a_dict_names_the_key(fitted, tmp_path):
     model = fitted[0]
-    data = model.to_dict()
+    data = file_dict(model, tmp_path)
     data["estimator_params"]["manoeuvres"] = {"keep": 1, "change": 2}
-    with pytest.raises(ValueError, match="'estimator_params' .* 'manoeuvres' parameter") as error:
-        HierarchicalHMMGMRRegressor.from_dict(data)
+    with pytest.raises(ValueError, match="'estimator_params.manoeuvres' must be a param") as error:
+        load_dict(data, tmp_path)
     assert "unknown parameter" not in str(error.value)
 
 

@@ -83,3 +83,54 @@ def test_conversion_errors_say_what_is_wrong(data):
     hmm = HMMGMRRegressor(n_states=2, random_state=0).fit(X, y, groups=groups).to_hmmlearn()
     with pytest.raises(ValueError, match="n_outputs must be an integer in"):
         HMMGMRRegressor.from_hmmlearn(hmm, n_outputs=3)
+
+
+def _first_order(estimates, groups, decay):
+    """The read-out by a plain loop: s_t = a s_(t-1) + (1 - a) e_t, restarted per recording."""
+    smoothed = np.array(estimates, dtype=float)
+    for t in range(1, len(smoothed)):
+        if groups[t] == groups[t - 1]:
+            smoothed[t] = decay * smoothed[t - 1] + (1 - decay) * smoothed[t]
+    return smoothed
+
+
+def test_output_smoothing_given_to_from_hmmlearn_smooths_the_predictions(data, tmp_path):
+    """#51 item 6: output_smoothing=5.0 was stored by get_params, ignored by predict and kept
+    in the saved file."""
+    from skhmmgmr import portable
+
+    X, y, groups = data
+    hmm = HMMGMRRegressor(n_states=3, random_state=0).fit(X, y, groups=groups).to_hmmlearn()
+    plain = HMMGMRRegressor.from_hmmlearn(hmm, n_outputs=1)
+    smoothed = HMMGMRRegressor.from_hmmlearn(hmm, n_outputs=1, output_smoothing=5.0)
+    assert smoothed.get_params()["output_smoothing"] == 5.0
+    assert smoothed.output_smoothing_ == pytest.approx(5.0, rel=1e-12)
+    expected = _first_order(plain.predict(X, groups=groups), groups, np.exp(-1 / 5.0))
+    got = smoothed.predict(X, groups=groups)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+    assert not np.allclose(got, plain.predict(X, groups=groups))
+    # the saved file holds the read-out, and loads predicting the same
+    path = tmp_path / "smoothed.json"
+    portable.save(smoothed, path)
+    restored = portable.load(path)
+    np.testing.assert_array_equal(restored.predict(X, groups=groups), got)
+    with pytest.raises(ValueError, match="output_smoothing='auto': 'auto' chooses the read-out"):
+        HMMGMRRegressor.from_hmmlearn(hmm, n_outputs=1, output_smoothing="auto")
+
+
+def test_from_fitted_model_applies_or_refuses_output_smoothing(data):
+    X, y, groups = data
+    fitted = HMMGMRRegressor(n_states=2, output_smoothing=3.0, random_state=0)
+    fitted.fit(X, y, groups=groups)
+    expected = fitted.predict(X, groups=groups)
+    # the model's own read-out is kept without the parameter, or with the same time constant
+    for params in ({}, {"output_smoothing": 3.0}, {"output_smoothing": "auto"}):
+        copy = HMMGMRRegressor.from_fitted_model(fitted.model_, **params)
+        np.testing.assert_array_equal(copy.predict(X, groups=groups), expected)
+    for other in (5.0, 0.0):
+        with pytest.raises(ValueError, match=rf"output_smoothing={other!r} asks for a read-out"):
+            HMMGMRRegressor.from_fitted_model(fitted.model_, output_smoothing=other)
+    # a model without a read-out is given the one asked for
+    bare = fitted.model_.with_output_decay(np.zeros(1))
+    copy = HMMGMRRegressor.from_fitted_model(bare, output_smoothing=3.0)
+    np.testing.assert_allclose(copy.predict(X, groups=groups), expected, rtol=0, atol=1e-12)

@@ -17,9 +17,9 @@ from skhmmgmr.datasets import (
     make_lane_keeping,
     torque_ahead,
 )
-from skhmmgmr.datasets._horizon import measured_log, rollout
-from skhmmgmr.datasets._sensors import SensorStream
-from skhmmgmr.datasets._simulator import Section
+from skhmmgmr.datasets._simulator._horizon import measured_log, rollout
+from skhmmgmr.datasets._simulator._section import Section, SectionSpec
+from skhmmgmr.datasets._simulator._sensors import SensorStream
 
 RATE = 50.0
 SEEDS = dict(random_state=5, road_random_state=7)
@@ -46,10 +46,11 @@ def test_a_rollout_with_fixed_torques_is_a_plain_run_from_the_same_state(
     # A plain run of the simulator with a fixed torque sequence, measured by the batch logger.
     duration, n_rows = 5.0, 40
     torques = np.cumsum(np.random.default_rng(3).normal(0.0, 0.05, int(duration * RATE)))
-    section = Section(duration, 7, "defensive", 100.0, RATE, "highway", 5, 7, vehicle)
+    spec = SectionSpec(duration, 7, 100.0, RATE, "highway", 5, 7, sensor_noise, vehicle)
+    section = Section(spec, "defensive")
     column = np.empty((section.n_samples, 2))
     log = section.simulate(lambda row, states: torques[row], column_log=column)
-    measured, _, errors = measured_log(section, log, sensor_noise)
+    measured, _, errors = measured_log(section, log)
     state = log[start].copy()
 
     sensors = SensorStream(FEATURE_NAMES, errors, 1.0 / RATE, section.speed, sensor_noise)
@@ -215,3 +216,14 @@ def test_the_rollouts_run_in_the_recordings_car(preview_model):
     assert not np.allclose(default_car["driver_torque"], ahead["driver_torque"])
     with pytest.raises(ValueError, match="vehicle"):
         torque_ahead(preview_model, duration=4.0, sampling_rate=RATE, vehicle={"bogus": 1.0})
+
+
+def test_a_model_of_two_outputs_is_refused_naming_the_model():
+    # it failed in numpy: "setting an array element with a sequence"
+    human = make_lane_keeping(10.0, sampling_rate=RATE, random_state=0)
+    targets = pd.DataFrame({"torque": human["driver_torque"], "twice": 2 * human["driver_torque"]})
+    model = HMMGMRRegressor(n_states=2, random_state=0).fit(human[PREVIEW], targets)
+    with pytest.raises(
+        ValueError, match="HMMGMRRegressor returned 2 values at 0.000 s; one torque"
+    ):
+        torque_ahead(model, horizons=(0.1,), duration=2.0, sampling_rate=RATE)

@@ -1,4 +1,5 @@
-"""Files written by skhmmgmr 0.1.0 still load: portable JSON to the last bits, pickles, skops.
+"""Files written by skhmmgmr 0.1.0 still load: portable JSON to the last bits, pickles and skops
+files through the explicit loader of ``skhmmgmr.legacy``.
 
 The fixtures in ``tests/fixtures/`` were written by 0.1.0 (``make_legacy_fixtures.py``), before
 the package moved from one flat folder into subpackages: portable model files, the predictions
@@ -6,6 +7,7 @@ the package moved from one flat folder into subpackages: portable model files, t
 public name 0.1.0 defined.
 """
 
+import io
 import json
 import pickle
 from pathlib import Path
@@ -13,8 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skhmmgmr import FilterStream, HMMGMRRegressor
-from skhmmgmr.portable import load_json, read_model
+from skhmmgmr import FilterStream, HMMGMRRegressor, InconsistentVersionWarning, legacy, portable
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 CASES = ("full", "tied", "marginalize", "carry_forward")
@@ -44,7 +45,7 @@ def _inputs(expected, case):
 
 @pytest.mark.parametrize("case", CASES)
 def test_a_0_1_0_json_file_predicts_to_the_last_bits(expected, case):
-    model = HMMGMRRegressor.from_json(FIXTURES / f"legacy_0_1_0_{case}.json")
+    model = portable.load(FIXTURES / f"legacy_0_1_0_{case}.json")
     X, groups = _inputs(expected, case), expected["groups"]
     mean, std = model.predict(X, groups=groups, return_std=True)
     assert_same(mean, expected, f"{case}_mean")
@@ -55,25 +56,24 @@ def test_a_0_1_0_json_file_predicts_to_the_last_bits(expected, case):
 
 @pytest.mark.parametrize("case", CASES)
 def test_a_0_1_0_json_file_streams_to_the_last_bits(expected, case):
-    model = HMMGMRRegressor.from_json(FIXTURES / f"legacy_0_1_0_{case}.json")
+    model = portable.load(FIXTURES / f"legacy_0_1_0_{case}.json")
     X, groups = _inputs(expected, case), expected["groups"]
     first = X[groups == groups[0]]
     mean, std = model.filter_stream().update_batch(first, return_std=True)
     assert_same(mean, expected, f"{case}_stream_mean")
     assert_same(std, expected, f"{case}_stream_std")
-    # The file read without the estimator: the same fitted model, the same stream.
-    portable = read_model(load_json(FIXTURES / f"legacy_0_1_0_{case}.json"))
-    missing = portable.estimator_params["missing_values"]
-    stream = FilterStream(portable.model, missing_values=missing)
+    # The stream of the fitted model alone: the same stream.
+    stream = FilterStream(model.model_, missing_values=model.missing_values)
     assert_same(stream.update_batch(first), expected, f"{case}_stream_mean")
 
 
 def test_a_0_1_0_json_file_keeps_its_covariance_form_and_stale_inputs():
-    tied = HMMGMRRegressor.from_json(FIXTURES / "legacy_0_1_0_tied.json")
+    tied = portable.load(FIXTURES / "legacy_0_1_0_tied.json")
     assert tied.covariance_type == "tied"
-    carried = HMMGMRRegressor.from_json(FIXTURES / "legacy_0_1_0_carry_forward.json")
+    carried = portable.load(FIXTURES / "legacy_0_1_0_carry_forward.json")
     assert carried.missing_values == "carry_forward"
-    assert "stale_inputs" in load_json(FIXTURES / "legacy_0_1_0_carry_forward.json")
+    assert carried.model_.stale_noise is not None
+    assert "stale_inputs" in json.loads((FIXTURES / "legacy_0_1_0_carry_forward.json").read_text())
 
 
 def _legacy_classes():
@@ -84,13 +84,19 @@ def _legacy_classes():
 
 
 @pytest.mark.parametrize("module, qualname", _legacy_classes())
-def test_every_0_1_0_class_path_resolves_as_a_pickle_names_it(module, qualname):
+def test_every_0_1_0_class_path_resolves_through_the_legacy_loader(module, qualname):
     # A pickle or a skops file names a class by its module and qualified name; the crafted
     # pickle holds that reference alone, so the check needs no array written by numpy 2.
     reference = f"c{module}\n{qualname}\n.".encode()
-    found = pickle.loads(reference)
+    found = legacy.load_pickle(io.BytesIO(reference))
     assert found.__name__ == qualname.rsplit(".", 1)[-1]
     assert found.__module__.startswith("skhmmgmr")
+
+
+def test_the_old_private_modules_are_not_importable_by_their_old_names():
+    # no import-time finder answers them: only the loader maps them
+    with pytest.raises(ModuleNotFoundError):
+        pickle.loads(b"cskhmmgmr._fitted\nFittedHMMGMR\n.")
 
 
 @pytest.mark.skipif(
@@ -98,8 +104,10 @@ def test_every_0_1_0_class_path_resolves_as_a_pickle_names_it(module, qualname):
     reason="the 0.1.0 pickle's arrays were written by numpy 2 (numpy._core)",
 )
 def test_a_0_1_0_pickle_loads_and_predicts_the_same(expected):
-    with open(FIXTURES / "legacy_0_1_0_regressor.pkl", "rb") as file:
-        saved = pickle.load(file)
+    with pytest.warns(InconsistentVersionWarning, match="0.1.0 or earlier") as caught:
+        saved = legacy.load_pickle(FIXTURES / "legacy_0_1_0_regressor.pkl")
+    warned = {record.message.class_name for record in caught}
+    assert {"HMMGMRRegressor", "FittedHMMGMR", "FilterStream"} <= warned
     model, stream = saved["regressor"], saved["stream"]
     assert isinstance(model, HMMGMRRegressor)
     assert isinstance(stream, FilterStream)
@@ -113,13 +121,17 @@ def test_a_0_1_0_pickle_loads_and_predicts_the_same(expected):
     assert np.array_equal(stream.update_batch(first), model.filter_stream().update_batch(first))
 
 
-def test_a_0_1_0_skops_file_loads_with_its_trusted_types_and_predicts_the_same(expected):
+@pytest.mark.parametrize("names", ["current", "0.1.0"])
+def test_a_0_1_0_skops_file_loads_with_its_trusted_types_and_predicts_the_same(expected, names):
     sio = pytest.importorskip("skops.io")
     path = FIXTURES / "legacy_0_1_0_regressor.skops"
-    untrusted = sio.get_untrusted_types(file=path)
-    # The file names 0.1.0's private modules; they load as the modules of today.
-    assert "skhmmgmr._fitted.FittedHMMGMR" in untrusted
-    model = sio.load(path, trusted=untrusted)
+    # The file names 0.1.0's private modules; the loader lists and loads them as today's.
+    untrusted = legacy.untrusted_skops_types(path)
+    assert "skhmmgmr._hmm._fitted.FittedHMMGMR" in untrusted
+    old_names = sio.get_untrusted_types(file=path)
+    assert "skhmmgmr._fitted.FittedHMMGMR" in old_names
+    with pytest.warns(InconsistentVersionWarning):
+        model = legacy.load_skops(path, trusted=untrusted if names == "current" else old_names)
     assert type(model) is HMMGMRRegressor
     X, groups = expected["X_gaps"], expected["groups"]
     mean, std = model.predict(X, groups=groups, return_std=True)

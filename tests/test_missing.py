@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy.stats import multivariate_normal
+from test_portable import file_dict, load_dict
 
 from skhmmgmr import FilterStream, HMMGMRRegressor
 from skhmmgmr._core._sequences import Recordings
@@ -408,11 +409,11 @@ def test_missing_values_error_still_refuses_nan(gappy_model):
         HMMGMRRegressor(n_states=2).fit(np.nan_to_num(X), y, groups=groups)
 
 
-def test_tags_and_portable_model_keep_the_setting(gappy_model):
+def test_tags_and_portable_model_keep_the_setting(gappy_model, tmp_path):
     model, X, _, groups = gappy_model
     assert model.__sklearn_tags__().input_tags.allow_nan
     assert not HMMGMRRegressor().__sklearn_tags__().input_tags.allow_nan
-    restored = HMMGMRRegressor.from_dict(model.to_dict())
+    restored = load_dict(file_dict(model, tmp_path), tmp_path)
     assert restored.missing_values == "marginalize"
     np.testing.assert_array_equal(
         restored.predict(X, groups=groups), model.predict(X, groups=groups)

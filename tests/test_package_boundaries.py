@@ -4,11 +4,14 @@ Three rules, checked by walking the abstract syntax tree of every module of the 
 
 - scikit-learn's private API (a ``_``-prefixed module or name) is imported by
   ``_core/_compat.py`` only, so a change in a scikit-learn release is dealt with in one place;
-- no module reads another module's private state: an attribute access ``obj._name`` or an import
-  ``from .module import _name`` is allowed only in the module that defines ``_name`` (a name a
-  module imports counts as defined there, so ``_core/_compat.py`` lends scikit-learn's names),
-  or, for ``self._name``, in a subclass of a class whose module defines it (a protected hook, as
-  scikit-learn's ``_validate_params`` is to its estimators);
+- no module reads another module's private state: an attribute access ``obj._name`` is allowed
+  only in a module that defines ``_name`` or, for ``self._name``, in a subclass of a class whose
+  module defines it (a protected hook, as scikit-learn's ``_validate_params`` is to its
+  estimators); an import ``from .module import _name`` (under any alias) is never allowed, but
+  from ``_core/_compat.py``, which lends scikit-learn's private names, and of a private module
+  (``from . import _module``). A name a module imports from outside the package counts as
+  defined there; a name imported from another module of the package does not, or the import
+  would excuse itself;
 - the emission model owns the form of the covariance: outside ``_hmm/_emissions.py`` (and the
   pure numerical functions of ``_hmm/_gaussian.py``) no module compares anything with a
   family's name (``"full"``, ``"tied"``...) or with a ``covariance_type``, names a family's
@@ -37,6 +40,11 @@ ALLOWED_PRIVATE_ACCESS: set[tuple[str, str]] = {
     # an hmmlearn model or a FittedHMMGMR) and checks its parameters against the estimator
     # class's own constraints, as fit does: scikit-learn's convention for them is this name.
     ("_io.py", "_parameter_constraints"),
+    # The model file's writer and reader ask a regressor class what its file holds: its
+    # ``model_type`` and the parameters the file keeps (the hierarchical regressor's fitted
+    # manoeuvres), the two hooks of the estimator's model I/O mixin (``estimator/_io.py``).
+    ("_portable.py", "_portable_type"),
+    ("_portable.py", "_portable_params"),
     # The command line checks an option that sets a model's parameter (--output-smoothing,
     # --sampling-period...) by that parameter's own constraint when it parses it, so that the
     # command line and the API refuse the same values alike, with no rule restated.
@@ -107,13 +115,21 @@ def _defined_private_names(tree):
             names.add(node.attr)
         elif isinstance(node, ast.arg):
             names.add(node.arg)
-        elif isinstance(node, ast.alias):
-            names.add(node.asname or node.name.split(".")[0])
+        elif isinstance(node, ast.Import):
+            names.update(alias.asname or alias.name.split(".")[0] for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            # from outside the package, the name it binds; from inside, only a private alias
+            # (the name imported is read, not defined: _private_imports checks it)
+            names.update(
+                alias.asname or alias.name
+                for alias in node.names
+                if node.level == 0 or alias.asname
+            )
     return {name for name in names if _is_private(name)}
 
 
 def _private_accesses(tree):
-    """(line, name, how, class) of every read of a private attribute or import of a private name.
+    """(line, name, class) of every read of a private attribute.
 
     ``class`` is the enclosing class of a ``self._name`` (or ``Base._name``) read, else None.
     """
@@ -122,21 +138,41 @@ def _private_accesses(tree):
     def visit(node, cls):
         if isinstance(node, ast.ClassDef):
             cls = node
-        if isinstance(node, ast.Attribute) and _is_private(node.attr):
-            if not isinstance(node.ctx, ast.Store):
-                bases = {b.id for b in cls.bases if isinstance(b, ast.Name)} if cls else set()
-                owner = node.value.id if isinstance(node.value, ast.Name) else None
-                inherited = owner in {"self", "cls"} | bases
-                found.append((node.lineno, node.attr, "attribute", cls if inherited else None))
-        elif isinstance(node, ast.ImportFrom) and node.level > 0:
-            for alias in node.names:
-                if _is_private(alias.name):
-                    found.append((node.lineno, alias.name, "import", None))
+        if (
+            isinstance(node, ast.Attribute)
+            and _is_private(node.attr)
+            and not isinstance(node.ctx, ast.Store)
+        ):
+            bases = {b.id for b in cls.bases if isinstance(b, ast.Name)} if cls else set()
+            owner = node.value.id if isinstance(node.value, ast.Name) else None
+            inherited = owner in {"self", "cls"} | bases
+            found.append((node.lineno, node.attr, cls if inherited else None))
         for child in ast.iter_child_nodes(node):
             visit(child, cls)
 
     visit(tree, None)
     return found
+
+
+def _private_imports(tree):
+    """(line, name, module, level) of every relative import of a private name, under any alias:
+    ``from <level dots><module> import _name [as other]``."""
+    return [
+        (node.lineno, alias.name, node.module, node.level)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and node.level > 0
+        for alias in node.names
+        if _is_private(alias.name)
+    ]
+
+
+def _lends(path, name, module, level):
+    """Whether ``from <level dots><module> import name`` in ``path`` may import a private name:
+    it comes from the compat module, or it is a module of the package."""
+    if _module_path(path, module, level) == COMPAT:
+        return True
+    submodule = f"{module}.{name}" if module else name
+    return _module_path(path, submodule, level).exists()
 
 
 def _module_path(path, module, level):
@@ -200,7 +236,7 @@ def test_no_module_reads_another_modules_private_state():
     offenders = []
     for path, tree in trees.items():
         module = _relative(path)
-        for line, name, how, cls in _private_accesses(tree):
+        for line, name, cls in _private_accesses(tree):
             if module in defined_in[name] or (path.name, name) in ALLOWED_PRIVATE_ACCESS:
                 continue
             if cls is not None:
@@ -208,7 +244,12 @@ def test_no_module_reads_another_modules_private_state():
                 if inherited & defined_in[name]:
                     continue
             owners = ", ".join(sorted(defined_in[name])) or "outside the package"
-            offenders.append(f"{module}:{line}: {how} {name} (defined in {owners})")
+            offenders.append(f"{module}:{line}: attribute {name} (defined in {owners})")
+        for line, name, source, level in _private_imports(tree):
+            if _lends(path, name, source, level) or (path.name, name) in ALLOWED_PRIVATE_ACCESS:
+                continue
+            owner = _relative(_module_path(path, source, level))
+            offenders.append(f"{module}:{line}: import {name} (defined in {owner})")
     assert not offenders, "private state read across modules:\n" + "\n".join(offenders)
 
 
@@ -348,13 +389,38 @@ def test_the_sklearn_rule_recognises_private_imports(source, expected):
 
 
 def test_the_private_state_rule_sees_attribute_reads_and_imports():
-    accesses = _private_accesses(
-        ast.parse("est._center\nfrom .a import _b\nself._c = 1\nx.__len__")
-    )
-    assert sorted((name, how) for _, name, how, _ in accesses) == [
-        ("_b", "import"),
-        ("_center", "attribute"),
+    source = "est._center\nfrom .a import _b\nself._c = 1\nx.__len__\nfrom .d import _e as f"
+    tree = ast.parse(source)
+    assert [name for _, name, _ in _private_accesses(tree)] == ["_center"]
+    assert [(name, module) for _, name, module, _ in _private_imports(tree)] == [
+        ("_b", "a"),
+        ("_e", "d"),
     ]
+
+
+@pytest.mark.parametrize(
+    "source, defined",
+    [
+        # an import of another module's private name does not define it, under any alias
+        ("from .a import _b", set()),
+        ("from .a import _b as c", set()),
+        ("from .a import _b as _c", {"_c"}),
+        # a private alias of a public name, and names from outside the package, are defined
+        ("from .a import b as _b", {"_b"}),
+        ("from sklearn.base import _fit_context", {"_fit_context"}),
+        ("import numpy as _np", {"_np"}),
+        ("def _f():\n    _x = 1", {"_f", "_x"}),
+    ],
+)
+def test_an_import_of_another_modules_private_name_defines_nothing(source, defined):
+    assert _defined_private_names(ast.parse(source)) == defined
+
+
+def test_a_private_module_and_the_compat_modules_names_may_be_imported():
+    module = PACKAGE / "estimator" / "_regressor.py"
+    assert _lends(module, "_fit_context", "_core._compat", 2)
+    assert _lends(PACKAGE / "__init__.py", "_version", None, 1)
+    assert not _lends(module, "_private_name", "_io", 1)
 
 
 def _version_tuple(text):
@@ -390,23 +456,20 @@ def test_the_oldest_constraints_are_the_lower_bounds_pyproject_claims():
         )
 
 
-def test_the_test_extra_holds_the_can_extra():
-    """CI installs ``[test]``: the comma2k19 loader's DBC decoding runs there only if the
-    ``can`` extra is part of it, with the same bounds."""
+@pytest.mark.parametrize(
+    "extra, why",
+    [
+        ("can", "the comma2k19 loader's DBC decoding"),
+        ("fetch", "the range reads of comma2k19"),
+        ("fmu", "the FMU export, validated and simulated by FMPy"),
+    ],
+)
+def test_the_test_extra_holds_the_optional_extras(extra, why):
+    """CI installs ``[test]``: what an extra serves is tested only if the extra is part of
+    it, with the same bounds."""
     import tomllib
 
     extras = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())["project"][
         "optional-dependencies"
     ]
-    assert set(extras["can"]) <= set(extras["test"])
-
-
-def test_the_test_extra_holds_the_fetch_extra():
-    """CI installs ``[test]``: the range reads of comma2k19 are tested only if the ``fetch``
-    extra is part of it, with the same bounds."""
-    import tomllib
-
-    extras = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())["project"][
-        "optional-dependencies"
-    ]
-    assert set(extras["fetch"]) <= set(extras["test"])
+    assert set(extras[extra]) <= set(extras["test"]), f"{why} is not tested"

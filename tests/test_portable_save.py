@@ -14,7 +14,7 @@ from sklearn.exceptions import NotFittedError
 from sklearn.linear_model import LinearRegression
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
-from test_portable import edited
+from test_portable import edited, file_dict
 
 from skhmmgmr import HMMGMRRegressor, SteeringFeatures, make_torque_pipeline, portable
 from skhmmgmr.datasets import make_lane_keeping, to_panel
@@ -126,15 +126,20 @@ def test_the_velocity_filter_restarts_at_every_recording_after_loading(data, tmp
     assert not np.array_equal(routed, unrouted)
 
 
-def test_a_regressor_round_trip_and_its_shortcuts_write_the_same_file(data, tmp_path, validator):
+def test_a_regressor_round_trip_and_its_deprecated_shortcuts_write_the_same_file(
+    data, tmp_path, validator
+):
     model = HMMGMRRegressor(n_states=3, random_state=0)
     model.fit(data[INPUTS], data["driver_torque"], groups=data["recording"])
     saved, exported = tmp_path / "saved.json", tmp_path / "exported.json"
     portable.save(model, saved)
-    model.export_json(exported)
+    with pytest.warns(FutureWarning, match=r"export_json is deprecated .*portable\.save\("):
+        model.export_json(exported)
     assert saved.read_bytes() == exported.read_bytes()
     assert schema_errors(validator, saved) == []
-    for restored in (portable.load(saved), HMMGMRRegressor.from_json(saved)):
+    with pytest.warns(FutureWarning, match=r"from_json is deprecated .*portable\.load\("):
+        from_json = HMMGMRRegressor.from_json(saved)
+    for restored in (portable.load(saved), from_json):
         assert type(restored) is HMMGMRRegressor
         assert restored.longest_recording_ == 400
         expected = model.predict(data[INPUTS], groups=data["recording"], return_std=True)
@@ -178,13 +183,10 @@ def test_every_form_of_the_regressor_validates_against_the_schema(
 def test_0_1_0_files_validate_and_load(path, validator):
     assert schema_errors(validator, path) == []
     loaded, training = portable.load(path, return_training=True)
-    from_json = HMMGMRRegressor.from_json(path)
     assert type(loaded) is HMMGMRRegressor and training == {}
     assert loaded.longest_recording_ is None
-    X = np.random.default_rng(0).normal(size=(50, loaded.n_features_in_))
-    if hasattr(loaded, "feature_names_in_"):
-        X = pd.DataFrame(X, columns=loaded.feature_names_in_)
-    np.testing.assert_array_equal(loaded.predict(X), from_json.predict(X))
+    assert not hasattr(loaded, "output_names_")  # 0.1.0 named outputs output_0...
+    assert np.isfinite(loaded.predict(np.zeros((5, loaded.n_features_in_)))).all()
 
 
 def test_the_schema_ships_with_the_package():
@@ -215,21 +217,22 @@ def pipeline_dict(data, tmp_path_factory):
         ("steps", [], "'steps' must be a non-empty list"),
         ("steps", ..., "lacks the key 'steps'"),
         ("steps[0].type", "StandardScaler", "'steps[0].type' is 'StandardScaler', expected one"),
-        ("steps[1].type", "SteeringFeatures", "'steps[1].type' is 'SteeringFeatures', expec"),
+        ("steps[1].type", "SteeringFeatures", "'steps' must hold exactly 1 item that is a reg"),
+        ("steps[0].type", "HMMGMRRegressor", "'steps' must hold exactly 1 item that is a regre"),
         ("steps[0].params.powers", ..., "lacks the key 'steps[0].params.powers'"),
-        ("steps[0].params.gain", 2.0, "unknown parameter(s) ['gain']"),
-        ("steps[0].params.friction_velocity", -1.0, "'friction_velocity' parameter"),
-        ("steps[0].params.velocity_filter", "fast", "'velocity_filter' parameter"),
+        ("steps[0].params.gain", 2.0, "'steps[0].params' holds the unknown key(s) ['gain']"),
+        ("steps[0].params.friction_velocity", -1.0, "friction_velocity' must be greater than 0"),
+        ("steps[0].params.velocity_filter", "fast", "velocity_filter' must be a number or null"),
         ("steps[0].params.sampling_period", None, "velocity_filter=0.1 needs sampling_period"),
-        ("steps[0].params.powers", [2, 2], "powers=(2, 2) repeats a power"),
+        ("steps[0].params.powers", [2, 2], "'steps[0].params.powers' holds [2] more than once"),
         ("steps[0].params.load_columns", ["speed"], "needs the column(s) ['speed']"),
         ("steps[0].params.powers", [2], "'steps[1]' takes 9 input(s), but the step before"),
-        ("steps[0].feature_names_in", ["a"], "'steps[0].feature_names_in' must be null or 4"),
+        ("steps[0].feature_names_in", ["a"], "'steps[0].feature_names_in' must be a list of 4"),
         ("steps[0].n_features_in", 0, "'steps[0].n_features_in' must be a positive integer"),
         ("steps[0].name", "a__b", "'steps[0].name' must be a step name"),
         ("steps[1].name", "steering_features", "names two steps"),
-        ("steps[1].model.filter.input_means", ..., "in 'steps[1].model': the model file lacks"),
-        ("steps[1].model.model_type", "Pipeline", "'model_type' is 'Pipeline', not one of ["),
+        ("steps[1].model.filter.input_means", ..., "lacks the key 'steps[1].model.filter.input_m"),
+        ("steps[1].model.model_type", "Pipeline", "'steps[1].model.model_type' is 'Pipeline', ex"),
         ("training.units", {"speed": "m/s"}, "'training.units' names ['speed']"),
         ("training.when", "today", "'training' holds the unknown key(s) ['when']"),
     ],
@@ -246,7 +249,10 @@ def test_bad_pipeline_files_are_refused_naming_the_problem(
 def test_the_regressors_shortcut_refuses_a_pipeline_file(pipeline_dict, tmp_path):
     path = tmp_path / "pipe.json"
     path.write_text(json.dumps(pipeline_dict))
-    with pytest.raises(ValueError, match="a file of a pipeline is read by skhmmgmr.portable.lo"):
+    with (
+        pytest.warns(FutureWarning, match="from_json is deprecated"),
+        pytest.raises(ValueError, match="a file of a pipeline is read by skhmmgmr.portable.lo"),
+    ):
         HMMGMRRegressor.from_json(path)
 
 
@@ -259,7 +265,7 @@ def test_an_unknown_step_type_fails_the_schema_too(pipeline_dict, validator):
 def test_an_older_version_loads_and_a_newer_one_is_refused(data, tmp_path):
     model = HMMGMRRegressor(n_states=2, random_state=0)
     model.fit(data[INPUTS], data["driver_torque"], groups=data["recording"])
-    current = model.to_dict()
+    current = file_dict(model, tmp_path)
     assert current["format_version"] == 2 and portable.FORMAT_VERSION == 3
     # version 1: the same keys without model_type and training
     older = {k: v for k, v in current.items() if k not in ("model_type", "training")}
@@ -331,7 +337,10 @@ def test_the_hierarchical_regressor_and_its_pipeline_round_trip(data, tmp_path, 
     assert list(restored.manoeuvres_) == ["left", "right"]
     np.testing.assert_array_equal(restored.states_per_manoeuvre_, [2, 1])
     # the flat regressor does not read it as one of its own
-    with pytest.raises(ValueError, match="holds a HierarchicalHMMGMRRegressor"):
+    with (
+        pytest.warns(FutureWarning, match="from_json is deprecated"),
+        pytest.raises(ValueError, match="holds a HierarchicalHMMGMRRegressor"),
+    ):
         HMMGMRRegressor.from_json(path)
 
     pipe = Pipeline(
@@ -354,3 +363,40 @@ def test_the_hierarchical_regressor_and_its_pipeline_round_trip(data, tmp_path, 
         restored[-1].predict_manoeuvre_proba(derived, groups=groups),
         pipe[-1].predict_manoeuvre_proba(derived, groups=groups),
     )
+
+
+def test_the_older_shortcuts_are_deprecated_aliases_that_still_work(data, tmp_path):
+    """One documented way to save and load (``portable.save``/``load``); the shortcuts of
+    before stay one release and say what to call instead."""
+    model = HMMGMRRegressor(n_states=2, random_state=0)
+    model.fit(data[INPUTS], data["driver_torque"], groups=data["recording"])
+    path = tmp_path / "model.json"
+    portable.save(model, path)
+    expected = json.loads(path.read_text())
+    X, groups = data[INPUTS], data["recording"]
+
+    def deprecated(name, instead):
+        return pytest.warns(
+            FutureWarning,
+            match=rf"{re.escape(name)} is deprecated since skhmmgmr 0\.2 and "
+            rf"will be removed in 0\.3; .*{re.escape(instead)}",
+        )
+
+    with deprecated("HMMGMRRegressor.to_dict", "portable.save(model, path)"):
+        assert model.to_dict() == expected
+    with deprecated("HMMGMRRegressor.from_dict", "portable.load(path)"):
+        restored = HMMGMRRegressor.from_dict(expected)
+    np.testing.assert_array_equal(
+        restored.predict(X, groups=groups), model.predict(X, groups=groups)
+    )
+    with deprecated("skhmmgmr.portable.load_json", "skhmmgmr.portable.load"):
+        assert portable.load_json(path) == expected
+    with deprecated("skhmmgmr.portable.read_model", "skhmmgmr.portable.load"):
+        read = portable.read_model(expected)
+    assert read.estimator_params == model.get_params()
+    np.testing.assert_array_equal(read.model.transmat, model.transmat_)
+    with deprecated("skhmmgmr.portable.to_dict", "HMMGMRRegressor.from_fitted_model"):
+        as_dict = portable.to_dict(model.model_, estimator_params=model.get_params())
+    with deprecated("skhmmgmr.portable.export_json", "skhmmgmr.portable.save"):
+        portable.export_json(as_dict, tmp_path / "low_level.json")
+    assert portable.load(tmp_path / "low_level.json").get_params() == model.get_params()

@@ -3,8 +3,9 @@
 import numpy as np
 import pandas as pd
 import pytest
+from numpy.testing import assert_array_equal
 
-from skhmmgmr.datasets import load_recordings
+from skhmmgmr.datasets import load_recordings, make_lane_keeping
 
 
 def _recording(n=5, rate=10.0, start=0.0, seed=0):
@@ -211,3 +212,37 @@ def test_meta_columns_are_not_features_and_recording_ids_are_required():
     raw.loc[2, "recording"] = None
     with pytest.raises(ValueError, match="'recording' of the DataFrame is empty in row 2"):
         load_recordings(raw, time="t")
+
+
+def test_a_frame_of_the_simulator_written_to_a_file_loads_back_as_it_was(tmp_path):
+    # The text column "manoeuvre" was taken for a feature and refused ("not numeric").
+    simulated = make_lane_keeping(20.0, scenario="lane_change", sampling_rate=20.0, random_state=0)
+    assert set(simulated["manoeuvre"]) > {"lane_keeping"}  # a lane change is in it
+    simulated.to_csv(tmp_path / "simulated.csv", index=False)
+    loaded = load_recordings(tmp_path / "simulated.csv", sampling_rate=20.0)
+    assert list(loaded.columns) == list(simulated.columns)
+    for name in simulated.columns:
+        if name == "setting":  # a float column once in a file
+            assert (loaded[name] == simulated[name]).all()
+        else:
+            pd.testing.assert_series_equal(loaded[name], simulated[name], check_dtype=False)
+    assert loaded.attrs["units"] == simulated.attrs["units"]
+    with pytest.raises(ValueError, match="meta, time or target"):
+        load_recordings(tmp_path / "simulated.csv", features=["manoeuvre", "yaw_rate"])
+    # on a grid, the labels are held (every sample a little early: its own), not interpolated
+    jittered = simulated.assign(time=simulated["time"] - np.tile([0.0, 0.004], 200))
+    jittered.to_parquet(tmp_path / "jittered.parquet")
+    gridded = load_recordings(tmp_path / "jittered.parquet", sampling_rate=20.0, max_gap=0.2)
+    kept = simulated.iloc[: len(gridded)]  # the grid ends at the last sample
+    assert len(gridded) == 399 and gridded["manoeuvre"].tolist() == kept["manoeuvre"].tolist()
+    assert_array_equal(gridded["crossing_time"], kept["crossing_time"])
+
+
+def test_sources_with_and_without_the_simulators_labels_are_refused_together(tmp_path):
+    simulated = make_lane_keeping(2.0, sampling_rate=10.0, random_state=0)
+    simulated.to_csv(tmp_path / "a.csv", index=False)
+    simulated.drop(columns=["manoeuvre", "crossing_time"]).assign(recording="b").to_csv(
+        tmp_path / "b.csv", index=False
+    )
+    with pytest.raises(ValueError, match=r"label column\(s\) \[\]"):
+        load_recordings(tmp_path)

@@ -13,7 +13,7 @@ from skhmmgmr.datasets import (
     make_driving_protocol,
     make_lane_keeping,
 )
-from skhmmgmr.datasets._sensors import (
+from skhmmgmr.datasets._simulator._sensors import (
     DERIVATIVES,
     SENSORS,
     check_sensor_noise,

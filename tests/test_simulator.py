@@ -1,12 +1,17 @@
 """Tests of the embedded lane-keeping simulator and the driving protocol."""
 
+import ast
+import dataclasses
+import functools
 from collections import Counter
+from pathlib import Path
 
 import joblib
 import numpy as np
 import pandas as pd
 import pytest
 
+from skhmmgmr import HMMGMRRegressor
 from skhmmgmr._core._schema import META_COLUMNS
 from skhmmgmr.datasets import (
     CALIBRATION_BANDS,
@@ -16,10 +21,13 @@ from skhmmgmr.datasets import (
     TARGET,
     DriverParameters,
     calibration_table,
+    draw_vehicle,
+    drive,
     make_driving_protocol,
     make_lane_keeping,
+    torque_ahead,
 )
-from skhmmgmr.datasets._road import (
+from skhmmgmr.datasets._simulator._road import (
     ANGLES,
     CLOTHOID_LENGTH,
     GRID_STEP,
@@ -30,6 +38,7 @@ from skhmmgmr.datasets._road import (
     make_road,
     step_curvature,
 )
+from skhmmgmr.datasets._simulator._section import SectionSpec
 
 SPEED = 100.0 / 3.6
 
@@ -300,3 +309,105 @@ def test_bad_parameters_name_the_parameter(kwargs, name):
 def test_bad_protocol_parameters(kwargs, name):
     with pytest.raises(ValueError, match=name):
         make_driving_protocol(duration=1.0, **kwargs)
+
+
+def _run(simulate, **kwargs):
+    """One call of the simulator's public function ``simulate`` with a short section."""
+    kwargs = {"duration": 1.0, "sampling_rate": 20.0, "random_state": 0, **kwargs}
+    if simulate == "make_lane_keeping":
+        return make_lane_keeping(**kwargs)
+    if simulate == "drive":
+        return drive(lambda row: 0.0, **kwargs)
+    return torque_ahead(_tiny_model(), horizons=(0.1,), **kwargs)
+
+
+@functools.cache
+def _tiny_model():
+    human = make_lane_keeping(5.0, sampling_rate=20.0, random_state=0)
+    return HMMGMRRegressor(n_states=2, random_state=0).fit(
+        human[["lateral_deviation_0m"]], human[TARGET]
+    )
+
+
+SIMULATORS = ("make_lane_keeping", "drive", "torque_ahead")
+
+
+@pytest.mark.parametrize("simulate", SIMULATORS)
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        (dict(duration=np.inf), "duration"),
+        (dict(duration=10**400), "duration"),
+        (dict(sampling_rate=np.inf), "sampling_rate"),
+        (dict(speed_kmh=np.inf), "speed_kmh"),
+        (dict(speed_kmh=1e-300), "speed_kmh"),
+        (dict(duration=True), "duration"),
+        (dict(setting=True), "setting"),
+        (dict(sensor_noise=np.inf), "sensor_noise"),
+        (dict(random_state="seed"), "random_state"),
+    ],
+)
+def test_the_section_is_refused_up_front_naming_the_argument(simulate, kwargs, name):
+    # inf made an OverflowError (duration, sampling_rate) or grew the memory until a
+    # MemoryError (speed_kmh), far from the call
+    with pytest.raises(ValueError, match=f"'{name}' parameter of {simulate} must be"):
+        _run(simulate, **kwargs)
+
+
+@pytest.mark.parametrize("simulate", SIMULATORS)
+@pytest.mark.parametrize(
+    "kwargs, words",
+    [
+        (dict(duration=1e9, sampling_rate=1.0), "1e+09 samples (2e+11 integration steps"),
+        (dict(duration=1e6, sampling_rate=1000.0), "1e+09 samples"),
+        (dict(duration=1e308, sampling_rate=1e300), "inf samples"),
+        (dict(duration=2e4, sampling_rate=1.0, speed_kmh=200.0), "road of 1111 km"),
+    ],
+)
+def test_a_section_too_large_for_memory_is_refused_before_any_allocation(simulate, kwargs, words):
+    # make_lane_keeping(1e9, sampling_rate=1) allocated until the memory cap
+    with pytest.raises(ValueError) as error:
+        _run(simulate, **kwargs)
+    assert words in str(error.value) and "at most" in str(error.value)
+
+
+def test_the_section_specification_is_checked_once_and_frozen():
+    spec = SectionSpec(10, 7, 100, 50, "highway", 0, None, "typical", 3)
+    assert (spec.duration, spec.speed_kmh, spec.sampling_rate) == (10.0, 100.0, 50.0)
+    assert spec.vehicle == draw_vehicle(3) and spec.sensor_noise == 1.0
+    assert spec.n_samples == 500 and spec.n_sub * spec.sampling_rate >= 200.0
+    assert spec.sensor_scale == draw_vehicle(3).sensor_noise
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        spec.duration = np.inf
+    with pytest.raises(ValueError, match="'scenario' parameter of SectionSpec"):
+        dataclasses.replace(spec, scenario="city")
+
+
+def _code_lines(function, lines):
+    """Lines of code of a function: neither blank, nor a comment, nor its docstring."""
+    body = function.body
+    start = function.lineno
+    if isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+        docstring = range(body[0].lineno, body[0].end_lineno + 1)
+    else:
+        docstring = range(0)
+    return sum(
+        1
+        for number in range(start, function.end_lineno + 1)
+        if number not in docstring and lines[number - 1].strip()[:1] not in ("", "#")
+    )
+
+
+def test_no_simulator_function_is_over_80_lines_of_code():
+    # _simulate was one function of 215 lines: the loop now calls the driver's, the steering
+    # column's and the vehicle's steps, each with its module
+    folder = Path(make_lane_keeping.__code__.co_filename).parent
+    sizes = {}
+    for path in folder.glob("*.py"):
+        text = path.read_text()
+        lines = text.splitlines()
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.FunctionDef):
+                sizes[f"{path.name}:{node.name}"] = _code_lines(node, lines)
+    assert len(sizes) > 40
+    assert {name: n for name, n in sizes.items() if n > 80} == {}

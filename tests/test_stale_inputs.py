@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 from scipy.stats import multivariate_normal
 from test_missing import random_parameters, switching_data, with_gaps
+from test_portable import file_dict, load_dict
 
 from skhmmgmr import FilterStream, FittedHMMGMR, HMMGMRRegressor
 from skhmmgmr._hmm._emissions import make_emissions
@@ -258,13 +259,13 @@ def test_predict_matches_a_plain_loop(carry_model):
     assert np.abs(marginalized - estimate).max() > 1e-3  # the carried values count
 
 
-def test_stream_carries_like_predict_and_restarts_with_the_recording(carry_model):
+def test_stream_carries_like_predict_and_restarts_with_the_recording(carry_model, tmp_path):
     model, X, _, groups = carry_model
     expected, expected_std = model.predict(X, groups=groups, return_std=True)
     for stream in (
         model.filter_stream(),
         pickle.loads(pickle.dumps(model.filter_stream())),
-        HMMGMRRegressor.from_dict(model.to_dict()).filter_stream(),
+        load_dict(file_dict(model, tmp_path), tmp_path).filter_stream(),
     ):
         assert stream.missing_values == "carry_forward"
         got, got_std = [], []
@@ -278,11 +279,11 @@ def test_stream_carries_like_predict_and_restarts_with_the_recording(carry_model
         np.testing.assert_allclose(got_std, expected_std, rtol=0, atol=1e-12)
 
 
-def test_portable_model_keeps_the_variograms(carry_model):
+def test_portable_model_keeps_the_variograms(carry_model, tmp_path):
     model, X, _, groups = carry_model
-    data = model.to_dict()
+    data = file_dict(model, tmp_path)
     assert len(data["stale_inputs"]["variances"]) == 3
-    restored = HMMGMRRegressor.from_dict(data)
+    restored = load_dict(data, tmp_path)
     assert restored.missing_values == "carry_forward"
     np.testing.assert_array_equal(
         restored.model_.stale_noise.variances, model.model_.stale_noise.variances
@@ -291,10 +292,10 @@ def test_portable_model_keeps_the_variograms(carry_model):
         restored.predict(X, groups=groups), model.predict(X, groups=groups)
     )
     data["stale_inputs"]["variances"][0][0] = None  # unknown: marginalised
-    assert np.isinf(HMMGMRRegressor.from_dict(data).model_.stale_noise.variances[0, 0])
+    assert np.isinf(load_dict(data, tmp_path).model_.stale_noise.variances[0, 0])
     data["stale_inputs"]["variances"][0][0] = -1.0
     with pytest.raises(ValueError, match="stale_noise.variances must be at least"):
-        HMMGMRRegressor.from_dict(data)
+        load_dict(data, tmp_path)
 
 
 def test_adapted_models_keep_the_variograms(carry_model):

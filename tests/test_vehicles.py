@@ -1,6 +1,7 @@
 """Tests of the simulator's cars: the reference car, drawn cars and the steering's stiff step."""
 
 import hashlib
+import math
 from dataclasses import asdict, replace
 
 import numpy as np
@@ -15,7 +16,9 @@ from skhmmgmr.datasets import (
     make_driving_protocol,
     make_lane_keeping,
 )
-from skhmmgmr.datasets._simulator import INTERNAL_RATE, STIFF_STEP
+from skhmmgmr.datasets._simulator._section import INTERNAL_RATE
+from skhmmgmr.datasets._simulator._steering import STIFF_STEP
+from skhmmgmr.datasets._simulator._vehicle import VEHICLE_LIMITS
 
 # The car a model drives alone (no arm inertia) that explicit Euler makes chatter: the widest
 # friction against the lightest wheel of VEHICLE_RANGES.
@@ -147,12 +150,12 @@ def test_the_car_sensor_noise_scales_every_sensor_error():
     [
         ({"wheel_fiction": 0.3}, "unknown parameter(s) ['wheel_fiction']"),
         ({"wheel_friction": -0.1}, "wheel_friction=-0.1"),
-        ({"assist_gain_slope": 0.0}, "assist_gain_slope must be a finite positive"),
+        ({"assist_gain_slope": 0.0}, "assist_gain_slope must be within [0.001, 5] 1/Nm"),
         ({"steering_ratio": float("nan")}, "steering_ratio=nan"),
         ({"wheel_inertia": "heavy"}, "wheel_inertia='heavy'"),
         ({"assist_gain": True}, "assist_gain=True"),
-        ("sport", "vehicle='sport'"),
-        (1.5, "vehicle=1.5"),
+        ("sport", "Got 'sport' instead"),
+        (1.5, "Got 1.5 instead"),
     ],
 )
 def test_a_bad_vehicle_names_the_parameter_and_value(vehicle, message):
@@ -225,3 +228,61 @@ def test_a_stiff_car_under_a_model_does_not_chatter(rate):
         )
         assert np.isfinite(frame["steering_wheel_acceleration"]).all(), seed
         assert frame["steering_wheel_acceleration"].std() < 5.0, seed
+
+
+@pytest.mark.parametrize(
+    "car, words",
+    [
+        # IndexError deep in the simulator, or the driver "lost control" 1e+300 m away
+        ({"mass": 1e300}, "mass must be within [500, 5000] kg (a car"),
+        ({"yaw_inertia": 1e-300}, "yaw_inertia must be within [200, 10000] kg m^2"),
+        # "column 'roll_angle' holds NaN", blaming the user's data
+        ({"roll_inertia": 1e-300}, "roll_inertia must be within [100, 3000] kg m^2"),
+        ({"roll_inertia": 10.0}, "roll_inertia must be within"),
+        ({"column_stiffness": 1.0}, "column_stiffness must be within [10, inf] Nm/rad"),
+        ({"sprung_mass": 1600.0}, "sprung_mass=1600.0 must be at most mass=1500.0"),
+        ({"roll_stiffness": 12000.0}, "roll_stiffness=12000.0 must be more than twice"),
+    ],
+)
+def test_a_car_beyond_physical_sense_is_refused_up_front(car, words):
+    with pytest.raises(ValueError, match="vehicle parameter") as error:
+        make_lane_keeping(1.0, random_state=0, vehicle=car)
+    assert words in str(error.value)
+
+
+def test_the_limits_hold_the_reference_car_and_every_drawn_range():
+    for name, value in asdict(VehicleParameters()).items():
+        low, high, unit, why = VEHICLE_LIMITS[name]
+        assert low <= value <= high and unit and why, name
+    for name, (low, high, *_) in VEHICLE_RANGES.items():
+        assert VEHICLE_LIMITS[name][0] <= low < high <= VEHICLE_LIMITS[name][1], name
+
+
+def test_cars_at_the_limits_drive_without_a_non_finite_value():
+    # The corners that stress the integration most: the lightest body on the stiffest tyres
+    # and damping, the heaviest on the softest, at the slowest speed, a human and a model.
+    light = {name: low for name, (low, *_) in VEHICLE_LIMITS.items()}
+    light.update(
+        front_cornering_stiffness=5e5,
+        rear_cornering_stiffness=5e5,
+        roll_damping=2e4,
+        roll_stiffness=5e5,
+        wheel_damping=5.0,
+        wheel_friction=5.0,
+        column_stiffness=1e4,
+        assist_gain_slope=5.0,
+        friction_coefficient=1.5,
+    )
+    heavy = {name: high for name, (_, high, *_) in VEHICLE_LIMITS.items()}
+    heavy.update(column_stiffness=math.inf, roll_damping=0.0, sprung_mass=5000.0)
+    for car in (light, heavy):
+        for speed in (5.0, 100.0):
+            section = dict(duration=5.0, speed_kmh=speed, vehicle=car, random_state=1)
+            for run in (make_lane_keeping, lambda **kwargs: drive(lambda row: -row[11], **kwargs)):
+                try:
+                    frame = run(**section)
+                except RuntimeError as error:  # a driver that cannot hold such a car says so
+                    assert "lost control" in str(error)
+                    continue
+                values = frame.drop(columns="crossing_time").select_dtypes(float)
+                assert np.isfinite(values.to_numpy()).all()

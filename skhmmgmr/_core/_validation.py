@@ -285,3 +285,19 @@ def check_column_scales(scale, column_names):
         f"lie within {low:g}..{high:g}). Change the column's unit (e.g. multiply it by a "
         "power of ten) before fitting."
     )
+
+
+def check_filter_period(step, period, *, what, remedy):
+    """Refuse rows ``step`` seconds apart for a velocity filter made for rows ``period``
+    seconds apart (more than 1 % off): its time constant would be off by their ratio.
+
+    One rule and one message for ``predict`` (a time level) and for the simulator driven by a
+    fitted pipeline (its sampling rate). ``what`` says whose step it is, ending with the step
+    (``"The time level of X steps 0.01 s (median) in recording 'a'"``); ``remedy`` what to
+    do instead.
+    """
+    if abs(step - period) > 0.01 * period:
+        raise ValueError(
+            f"{what}, but sampling_period={period!r}: the velocity filter would run "
+            f"{period / step:.3g} times too fast or slow. {remedy}"
+        )

@@ -4,6 +4,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .._core._pickled import PickleVersionMixin
 from ._em import HMMParameters
 from ._gmr import condition_on_inputs, filter_state_probabilities, gmr_estimates
 from ._readout import smooth_outputs
@@ -101,7 +102,7 @@ class Standardization:
 
 
 @dataclass(frozen=True)
-class FittedHMMGMR:
+class FittedHMMGMR(PickleVersionMixin):
     """A fitted HMM-GMR model (immutable): the HMM over standardised ``[inputs, outputs]``,
     its standardisation and the output shape.
 
@@ -210,8 +211,7 @@ class FittedHMMGMR:
 
     def __setstate__(self, state):
         """Unpickle; a model pickled before the read-out had none (zero decays)."""
-        for name, value in state.items():
-            object.__setattr__(self, name, value)
+        super().__setstate__(state)
         if "output_decay" not in state:
             object.__setattr__(self, "output_decay", _frozen(np.zeros(self.n_outputs)))
 

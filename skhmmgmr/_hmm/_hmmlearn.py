@@ -83,6 +83,13 @@ def estimator_to_hmmlearn(estimator):
 
 def estimator_from_hmmlearn(cls, hmm, *, n_outputs=1, feature_names=None, **params):
     """A fitted estimator of class ``cls`` (its ``from_fitted_model`` with ``params``) that
-    reads out ``hmm`` (:func:`from_hmmlearn`)."""
+    reads out ``hmm`` (:func:`from_hmmlearn`); ``output_smoothing="auto"``, which chooses the
+    read-out from training recordings, is refused."""
+    if isinstance(params.get("output_smoothing"), str):
+        raise ValueError(
+            f"output_smoothing={params['output_smoothing']!r}: 'auto' chooses the read-out in "
+            "fit, from the training recordings, which an hmmlearn model does not bring; give "
+            "a time constant in rows, or None"
+        )
     model = from_hmmlearn(hmm, n_outputs=n_outputs, feature_names=feature_names)
     return cls.from_fitted_model(model, **params)

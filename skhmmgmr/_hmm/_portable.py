@@ -3,21 +3,27 @@
 The format, every key and its units, is specified in the docstring of :mod:`skhmmgmr.portable`,
 which reads and writes whole files (the regressor, or a pipeline whose last step holds such a
 block). This module writes and reads the regressor's dict: :func:`to_dict` of a
-:class:`~skhmmgmr.FittedHMMGMR`, :func:`read_model` back, and the estimator's own ``to_dict``,
-``export_json``, ``from_dict`` and ``from_json`` (:func:`estimator_to_dict`,
-:func:`export_json`, :func:`estimator_from_dict`, :func:`estimator_from_json`): the
-estimator's parameters, fit information and training facts travel with the model.
+:class:`~skhmmgmr.FittedHMMGMR`, :func:`read_model` back, and those of an estimator
+(:func:`estimator_to_dict`, :func:`estimator_from_dict`): the estimator's parameters, fit
+information and training facts travel with the model. Every file is checked against the
+format's JSON Schema (``skhmmgmr/portable_schema.json``) by :func:`check_model_file` before
+anything is read from it; what the schema cannot say (array sizes across keys, the numerical
+checks) is checked here.
 """
 
+import functools
 import json
 import math
 from dataclasses import dataclass, field
+from importlib.resources import files
 from numbers import Integral
 
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
 from .._core._compat import InvalidParameterError
+from .._core._files import write_atomically
+from .._core._json_schema import check_document
 from .._version import __version__
 from ._emissions import emission_family
 from ._fitted import FittedHMMGMR, Standardization
@@ -34,6 +40,7 @@ REGRESSOR_TYPE = "HMMGMRRegressor"
 # The same file, whose states are the blocks of manoeuvres (``estimator_params`` name them)
 HIERARCHICAL_TYPE = "HierarchicalHMMGMRRegressor"
 REGRESSOR_TYPES = (REGRESSOR_TYPE, HIERARCHICAL_TYPE)
+SCHEMA_FILE = "portable_schema.json"
 
 _FILTER_SHAPES = {
     "start_probabilities": ("K",),
@@ -51,6 +58,11 @@ _STANDARDIZATION_SHAPES = {
     "output_scale": ("O",),
 }
 _JOINT_SHAPES = {"means": ("K", "D"), "covariances": ("K", "D", "D")}
+_SHAPES = {
+    "standardization": _STANDARDIZATION_SHAPES,
+    "filter": _FILTER_SHAPES,
+    "joint": _JOINT_SHAPES,
+}
 
 
 def to_dict(
@@ -73,7 +85,7 @@ def to_dict(
     gmr, scaling = model.gmr, model.standardization
     n_inputs, n_outputs = model.n_inputs, model.n_outputs
     if output_names is None:
-        output_names = [f"output_{i}" for i in range(n_outputs)]
+        output_names = default_output_names(n_outputs)
     output_names = [str(name) for name in output_names]
     if len(output_names) != n_outputs:
         raise ValueError(f"output_names has {len(output_names)} names for {n_outputs} output(s)")
@@ -142,10 +154,8 @@ def _to_plain(value, key):
 
 
 def export_json(data, path):
-    """Write a :func:`to_dict` dict to ``path`` as strict JSON (no NaN tokens)."""
-    text = json.dumps(data, indent=1, allow_nan=False)
-    with open(path, "w", encoding="utf-8") as file:
-        file.write(text + "\n")
+    """Write a model file's dict to ``path`` as strict JSON (no NaN tokens), atomically."""
+    write_atomically(path, json.dumps(data, indent=1, allow_nan=False) + "\n")
 
 
 def load_json(path):
@@ -169,6 +179,68 @@ def load_json(path):
         raise ValueError(f"{path} is not a valid model file: {exc}") from None
 
 
+@functools.cache
+def _schema_text():
+    return (files("skhmmgmr") / SCHEMA_FILE).read_text(encoding="utf-8")
+
+
+def model_file_schema():
+    """The JSON Schema of the model file, shipped with the package (a new dict)."""
+    return json.loads(_schema_text())
+
+
+@functools.cache
+def _schema():
+    return model_file_schema()  # read only, by check_document
+
+
+def check_model_file(data):
+    """Check a model file's dict: its header (a file of a newer format version is refused as
+    such), the format's JSON Schema, the sizes of its arrays and lists across keys, then the
+    repeated names (in linear time, after the sizes: a file of a huge list of names is refused
+    by its sizes first). Returns the format version; ``ValueError`` names the key at fault."""
+    if not isinstance(data, dict):
+        raise ValueError(f"a model file must be a JSON object, got {type(data).__name__}")
+    version = read_header(data)
+    repeated = []
+    check_document(data, _schema(), postponed=repeated)
+    if "steps" in data:  # a pipeline's file: its steps, then the regressor's block
+        for index, step in enumerate(data["steps"]):
+            where = f"steps[{index}]."
+            if "model" in step:
+                _check_sizes(step["model"], where + "model.")
+            elif step["feature_names_in"] is not None:
+                names, count = step["feature_names_in"], step["n_features_in"]
+                _check_length(names, count, where + "feature_names_in", "names")
+    else:
+        _check_sizes(data, "")
+    for check in repeated:
+        check()
+    return version
+
+
+def _check_length(values, length, where, what):
+    if len(values) != length:
+        raise ValueError(f"'{where}' must be a list of {length} {what}, got {len(values)}")
+
+
+def _check_sizes(block, where):
+    """The names and arrays of a regressor's block against its sizes ``K``, ``F``, ``O``."""
+    dims = _dims(block)
+    _check_length(block["feature_names"], dims["F"], where + "feature_names", "names")
+    _check_length(block["output_names"], dims["O"], where + "output_names", "names")
+    if "output_decay" in block:
+        _check_length(block["output_decay"], dims["O"], where + "output_decay", "decays")
+    for section, shapes in _SHAPES.items():
+        _arrays(block, section, shapes, dims, where)
+
+
+def _dims(block):
+    dims = {"K": block["n_states"], "F": block["n_inputs"], "O": block["n_outputs"]}
+    dims["D"] = dims["F"] + dims["O"]
+    return dims
+
+
 # Fit information the JSON format keeps, as the estimator's attributes (name + "_").
 FIT_INFO_KEYS = (
     "log_likelihood",
@@ -183,31 +255,41 @@ FIT_INFO_KEYS = (
 _HISTORIES = ("log_likelihood_history", "penalized_log_likelihood_history")
 
 
-def estimator_to_dict(estimator, *, model_type=REGRESSOR_TYPE, output_names=None, training=None):
-    """:func:`to_dict` of a fitted estimator's ``model_``, with its ``get_params()``, fit
-    information (:data:`FIT_INFO_KEYS`, the attributes ``name + "_"``) and its longest training
-    recording (``longest_recording_``) added to ``training``."""
+def default_output_names(n_outputs):
+    """The names a file gives outputs that have none: ``output_0``..."""
+    return [f"output_{i}" for i in range(n_outputs)]
+
+
+def estimator_to_dict(estimator, *, output_names=None, training=None):
+    """:func:`to_dict` of a fitted estimator's ``model_``, of the estimator's ``model_type``,
+    with the parameters its file keeps, its fit information (:data:`FIT_INFO_KEYS`, the
+    attributes ``name + "_"``), its output names (``output_names``, else those of fit,
+    ``output_names_``) and its longest training recording (``longest_recording_``) added to
+    ``training``."""
     check_is_fitted(estimator)
     longest = getattr(estimator, "longest_recording_", None)
+    if output_names is None:
+        output_names = getattr(estimator, "output_names_", None)
     return to_dict(
         estimator.model_,
-        model_type=model_type,
-        estimator_params=estimator.get_params(),
+        model_type=estimator._portable_type,
+        estimator_params=estimator._portable_params(),
         fit_info={key: getattr(estimator, key + "_", None) for key in FIT_INFO_KEYS},
-        output_names=output_names,
+        output_names=None if output_names is None else list(output_names),
         training={"longest_recording": longest, **(training or {})},
     )
 
 
-def estimator_from_dict(cls, data, *, model_type=REGRESSOR_TYPE):
-    """A fitted estimator of class ``cls`` restored from :func:`to_dict` output: its
+def estimator_from_dict(cls, data, *, checked=False):
+    """A fitted estimator of class ``cls`` restored from a regressor's file (``checked``:
+    already checked by :func:`check_model_file`, as the block of a pipeline's file is): its
     ``from_fitted_model`` with the stored parameters, then the stored fit information."""
-    portable = read_model(data)
+    portable = restore_model(data) if checked else read_model(data)
     kind = data.get("model_type", REGRESSOR_TYPE)
-    if kind != model_type:
+    if kind != cls._portable_type:
         raise ValueError(
-            f"the file holds a {kind} (its 'model_type'), not a {model_type}: read it "
-            f"with {kind}.from_dict or skhmmgmr.portable.load"
+            f"the file holds a {kind} (its 'model_type'), not a {cls._portable_type}: read it "
+            "with skhmmgmr.portable.load"
         )
     try:
         estimator = cls.from_fitted_model(portable.model, **portable.estimator_params)
@@ -215,18 +297,23 @@ def estimator_from_dict(cls, data, *, model_type=REGRESSOR_TYPE):
         raise ValueError(f"'estimator_params' holds a value fit refuses: {exc}") from exc
     except TypeError as exc:
         raise ValueError(f"'estimator_params' holds an unknown parameter: {exc}") from exc
+    except ValueError as exc:  # a read-out the parameters and the model disagree on
+        raise ValueError(f"'estimator_params' does not fit 'output_decay': {exc}") from exc
     for key, value in portable.fit_info.items():
         setattr(estimator, key + "_", np.asarray(value, float) if key in _HISTORIES else value)
     estimator.longest_recording_ = portable.training.get("longest_recording")
+    output_names = data["output_names"]
+    if output_names != default_output_names(len(output_names)):
+        estimator.output_names_ = np.asarray(output_names, dtype=object)
     return estimator
 
 
 def estimator_from_json(cls, path):
-    """A fitted estimator of class ``cls`` restored from a model file (its ``from_dict``);
-    an error names the file."""
+    """A fitted estimator of class ``cls`` restored from a model file; an error names the
+    file."""
     data = load_json(path)
     try:
-        return cls.from_dict(data)
+        return estimator_from_dict(cls, data)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from exc
 
@@ -243,31 +330,30 @@ class PortableModel:
 
 
 def read_model(data):
-    """:class:`PortableModel` restored from :func:`to_dict` output (validated)."""
-    if not isinstance(data, dict):
-        raise ValueError(
-            f"a portable HMM-GMR model must be a JSON object, got {type(data).__name__}"
-        )
-    version = read_header(data)
-    if version >= 2 and _require(data, "model_type") not in REGRESSOR_TYPES:
-        raise ValueError(
-            f"'model_type' is {data['model_type']!r:.100}, not one of {list(REGRESSOR_TYPES)}: "
-            "a file of a pipeline is read by skhmmgmr.portable.load"
-        )
-    dims = {"K": _count(data, "n_states"), "F": _count(data, "n_inputs")}
-    dims["O"] = _count(data, "n_outputs")
-    dims["D"] = dims["F"] + dims["O"]
-    feature_names = _names(data, "feature_names", dims["F"])
-    output_names = _names(data, "output_names", dims["O"])
-    named = _require(data, "feature_names_from_fit")
-    target_ndim = _require(data, "target_ndim")
-    if not isinstance(named, bool):
-        raise ValueError("'feature_names_from_fit' must be true or false")
-    if target_ndim not in (1, 2) or (target_ndim == 1 and dims["O"] != 1):
-        raise ValueError(f"'target_ndim' is {target_ndim!r}; it must be 1 (one output) or 2")
+    """:class:`PortableModel` of a regressor's file, checked (:func:`check_model_file`)."""
+    version = read_header(data) if isinstance(data, dict) else None
+    if version is not None and version >= 2:
+        kind = _require(data, "model_type")
+        if kind not in REGRESSOR_TYPES:
+            raise ValueError(
+                f"'model_type' is {kind!r:.100}, not one of {list(REGRESSOR_TYPES)}: a file of "
+                "a pipeline is read by skhmmgmr.portable.load"
+            )
+    check_model_file(data)
+    return restore_model(data)
+
+
+def restore_model(data):
+    """:class:`PortableModel` of a regressor's file that follows the schema
+    (:func:`check_model_file`): the checks across keys and the numerical ones, then the
+    model."""
+    dims = _dims(data)
     scaling = _arrays(data, "standardization", _STANDARDIZATION_SHAPES, dims)
     filtering = _arrays(data, "filter", _FILTER_SHAPES, dims)
     joint = _arrays(data, "joint", _JOINT_SHAPES, dims)
+    feature_names, output_names = data["feature_names"], data["output_names"]
+    if data["target_ndim"] == 1 and dims["O"] != 1:
+        raise ValueError(f"'target_ndim' is 1 (one output), but 'n_outputs' is {dims['O']}")
     for key in ("input_scale", "output_scale"):
         if np.any(scaling[key] <= 0):
             raise ValueError(f"'standardization.{key}' must be positive")
@@ -286,32 +372,19 @@ def read_model(data):
             filtering["transition_matrix"],
             emissions,
             standardization,
-            scalar_output=target_ndim == 1,
-            feature_names=feature_names if named else None,
+            scalar_output=data["target_ndim"] == 1,
+            feature_names=feature_names if data["feature_names_from_fit"] else None,
             stale_noise=_stale_noise(data.get("stale_inputs"), dims["F"]),
-            output_decay=_output_decay(data, version, dims["O"]),
+            output_decay=data.get("output_decay"),
         )
     except (NotPositiveDefiniteError, np.linalg.LinAlgError) as exc:
         raise ValueError(f"'joint.covariances' is not usable: {exc}") from exc
     _check_filter_matches_joint(filtering, model)
     _check_conditional_covariances(model)
-
-    params = _require(data, "estimator_params")
-    if not isinstance(params, dict):
-        raise ValueError("'estimator_params' must be a JSON object")
-    fit_info = data.get("fit_info") or {}
-    if not isinstance(fit_info, dict):
-        raise ValueError("'fit_info' must be a JSON object")
+    fit_info = data.get("fit_info", {})
     fit_info = {key: fit_info[key] for key in FIT_INFO_KEYS if fit_info.get(key) is not None}
-    for key in ("log_likelihood_history", "penalized_log_likelihood_history"):
-        if key in fit_info:
-            history = fit_info[key]
-            if not isinstance(history, list) or not all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) for v in history
-            ):
-                raise ValueError(f"'fit_info.{key}' must be a list of numbers")
     training = read_training(data.get("training"), [*feature_names, *output_names])
-    return PortableModel(model, params, fit_info, training)
+    return PortableModel(model, data["estimator_params"], fit_info, training)
 
 
 def read_header(data):
@@ -319,11 +392,11 @@ def read_header(data):
     number from 1 to :data:`FORMAT_VERSION`, newer ones refused as written by a newer
     skhmmgmr."""
     if _require(data, "format") != FORMAT_NAME:
-        raise ValueError(f"'format' is {data['format']!r}, expected {FORMAT_NAME!r}")
+        raise ValueError(f"'format' is {data['format']!r:.100}, expected {FORMAT_NAME!r}")
     version = _require(data, "format_version")
     if isinstance(version, bool) or not isinstance(version, int) or version < 1:
         raise ValueError(
-            f"'format_version' is {version!r}; format versions are whole numbers from 1 "
+            f"'format_version' is {version!r:.100}; format versions are whole numbers from 1 "
             f"(this version of skhmmgmr reads 1 to {FORMAT_VERSION})"
         )
     if version > FORMAT_VERSION:
@@ -338,63 +411,29 @@ TRAINING_KEYS = ("longest_recording", "sampling_period", "units")
 
 
 def read_training(block, names, where="training"):
-    """The ``training`` block checked: ``longest_recording`` (a positive whole number or
-    null), ``sampling_period`` (a positive number of seconds or null) and ``units`` (input or
-    output name -> unit text; with ``names``, every key one of them)."""
+    """The facts of a ``training`` block that follows the schema, those known (not null),
+    after checking that ``units`` names only inputs and outputs (``names``)."""
     if block is None:
         return {}
-    if not isinstance(block, dict):
-        raise ValueError(f"'{where}' must be a JSON object")
-    unknown = sorted(set(block) - set(TRAINING_KEYS))
-    if unknown:
-        raise ValueError(f"'{where}' holds the unknown key(s) {unknown}; known: {TRAINING_KEYS}")
-    longest = block.get("longest_recording")
-    if longest is not None and (
-        isinstance(longest, bool) or not isinstance(longest, int) or longest < 1
-    ):
+    strangers = sorted(set(block.get("units") or {}) - set(names))
+    if strangers:
         raise ValueError(
-            f"'{where}.longest_recording' must be a positive whole number or null, got "
-            f"{longest!r:.100}"
+            f"'{where}.units' names {strangers}, neither inputs nor outputs of the model "
+            f"(those are {list(names)})"
         )
-    period = block.get("sampling_period")
-    if period is not None and (
-        isinstance(period, bool) or not isinstance(period, int | float) or not 0 < period < math.inf
-    ):
-        raise ValueError(
-            f"'{where}.sampling_period' must be a positive number of seconds or null, got "
-            f"{period!r:.100}"
-        )
-    units = block.get("units")
-    if units is not None:
-        if not isinstance(units, dict) or not all(isinstance(u, str) for u in units.values()):
-            raise ValueError(f"'{where}.units' must map names to unit texts")
-        strangers = sorted(set(units) - set(names)) if names is not None else []
-        if strangers:
-            raise ValueError(
-                f"'{where}.units' names {strangers}, neither inputs nor outputs of the model "
-                f"(those are {list(names)})"
-            )
     return {key: block[key] for key in TRAINING_KEYS if block.get(key) is not None}
 
 
 def _stale_noise(block, n_inputs):
     if block is None:
         return None
-    problem = (
-        "'stale_inputs' must be an object holding 'lags' (a list of whole numbers) and "
-        "'variances' (a list of lists of numbers or null, one list per input)"
-    )
-    if not isinstance(block, dict) or not isinstance(block.get("lags"), list):
-        raise ValueError(problem)
     lags = block["lags"]
-    if not all(isinstance(lag, int) and not isinstance(lag, bool) for lag in lags):
-        raise ValueError(f"'stale_inputs.lags' must hold whole numbers, got {lags!r:.200}")
-    if not all(1 <= lag <= MAX_LAG for lag in lags):
+    if not all(lag <= MAX_LAG for lag in lags):
         raise ValueError(f"'stale_inputs.lags' must lie in [1, {MAX_LAG}], got {lags!r:.200}")
     try:
         variances = np.array(block["variances"], dtype=float)  # null -> NaN
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{problem} ({exc})") from None
+    except ValueError:
+        raise ValueError("'stale_inputs.variances' must hold lists of equal length") from None
     noise = StaleInputNoise(
         np.array(lags, dtype=np.int64), np.where(np.isnan(variances), np.inf, variances)
     )
@@ -402,25 +441,6 @@ def _stale_noise(block, n_inputs):
         return noise.frozen(n_inputs)
     except ValueError as exc:
         raise ValueError(f"'stale_inputs' is not usable: {exc}") from None
-
-
-def _output_decay(data, version, n_outputs):
-    """The read-out decays of a file (zeros before version 3), checked."""
-    if version < SMOOTHED_VERSION:
-        return None
-    decay = _require(data, "output_decay")
-    if (
-        not isinstance(decay, list)
-        or len(decay) != n_outputs
-        or not all(
-            isinstance(a, (int, float)) and not isinstance(a, bool) and 0 <= a < 1 for a in decay
-        )
-    ):
-        raise ValueError(
-            f"'output_decay' must be a list of {n_outputs} number(s) in [0, 1), one per output; "
-            f"got {decay!r:.100}"
-        )
-    return np.array(decay, dtype=float)
 
 
 def _joint_emissions(block, joint):
@@ -483,42 +503,18 @@ def _require(data, key, where=""):
     return data[key]
 
 
-def _count(data, key):
-    value = _require(data, key)
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"{key!r} must be a positive integer, got {value!r}")
-    return value
-
-
-def _names(data, key, length):
-    names = _require(data, key)
-    if not isinstance(names, list) or len(names) != length:
-        raise ValueError(f"{key!r} must be a list of {length} names")
-    if not all(isinstance(name, str) for name in names):
-        raise ValueError(f"{key!r} must hold strings only")
-    repeated = sorted({name for name in names if names.count(name) > 1})
-    if repeated:
-        raise ValueError(f"{key!r} names {repeated} more than once")
-    return names
-
-
-def _arrays(data, section, shapes, dims):
-    block = _require(data, section)
-    if not isinstance(block, dict):
-        raise ValueError(f"{section!r} must be a JSON object")
+def _arrays(data, section, shapes, dims, where=""):
+    """The arrays of a block as float arrays of the shapes ``shapes`` gives in ``dims``."""
     arrays = {}
     for key, symbolic in shapes.items():
-        name = f"{section}.{key}"
-        value = _require(block, key, where=f"{section}.")
+        name = f"{where}{section}.{key}"
         expected = tuple(dims[symbol] for symbol in symbolic)
         try:
-            array = np.asarray(value, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{name!r} is not a (nested) list of numbers") from exc
+            array = np.asarray(data[section][key], dtype=float)
+        except ValueError:  # lists of unequal lengths
+            raise ValueError(f"{name!r} holds lists of unequal lengths") from None
         if array.shape != expected:
             raise ValueError(f"{name!r} has shape {array.shape}, expected {expected}")
-        if not np.isfinite(array).all():
-            raise ValueError(f"{name!r} holds non-finite values")
         arrays[key] = array
     return arrays
 

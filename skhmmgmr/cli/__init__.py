@@ -1,6 +1,5 @@
 """Command line: ``skhmmgmr demo | select | report | fit | predict | export-c``."""
 
-from .._core._public import publish
 from ._commands import build_parser, main
 from ._export import command_export_c
 from ._fit import command_fit
@@ -18,5 +17,3 @@ __all__ = [
     "command_select",
     "main",
 ]
-
-publish(globals())

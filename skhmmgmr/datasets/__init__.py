@@ -1,7 +1,6 @@
 """Driving data: an embedded lane-keeping simulator and loaders for public and own recordings."""
 
 from .._core._panel import to_panel
-from .._core._public import publish
 from .._core._schema import (
     DRIVER,
     FEATURE_NAMES,
@@ -14,20 +13,28 @@ from .._core._schema import (
     TIME,
 )
 from ._base import clear_data_home, get_data_home
-from ._calibration import CALIBRATION_BANDS, THESIS_TABLE_C2, calibration_table
-from ._comma2k19 import load_comma2k19_segment
-from ._comma2k19_sample import load_comma2k19_sample
-from ._comma2k19_scan import scan_comma2k19
-from ._drive import drive
-from ._driver import DRIVER_STYLES, DriverParameters
-from ._fetch import COMMA2K19_URL, fetch_comma2k19
-from ._horizon import torque_ahead
-from ._protocol import make_driving_protocol
-from ._recordings import load_recordings
-from ._resample import resample_recordings
-from ._shift import shift_target
-from ._simulator import make_lane_keeping
-from ._vehicle import VEHICLE_RANGES, VehicleParameters, draw_vehicle
+from ._comma2k19 import (
+    COMMA2K19_URL,
+    fetch_comma2k19,
+    load_comma2k19_sample,
+    load_comma2k19_segment,
+    scan_comma2k19,
+)
+from ._recordings import load_recordings, resample_recordings, shift_target
+from ._simulator import (
+    CALIBRATION_BANDS,
+    DRIVER_STYLES,
+    THESIS_TABLE_C2,
+    VEHICLE_RANGES,
+    DriverParameters,
+    VehicleParameters,
+    calibration_table,
+    draw_vehicle,
+    drive,
+    make_driving_protocol,
+    make_lane_keeping,
+    torque_ahead,
+)
 
 __all__ = [
     "CALIBRATION_BANDS",
@@ -63,5 +70,3 @@ __all__ = [
     "TARGET",
     "TIME",
 ]
-
-publish(globals())

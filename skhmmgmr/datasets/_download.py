@@ -2,7 +2,7 @@
 
 Everything here is generic and needs no network: the remote side (range reads, resumable
 downloads, checksums the server publishes) is :mod:`._remote`, and the dataset fetchers (such as
-:mod:`._fetch` for comma2k19) add the URLs, file names and archive layouts.
+:mod:`._comma2k19._fetch` for comma2k19) add the URLs, file names and archive layouts.
 """
 
 import os

@@ -1,10 +1,7 @@
 """The HMM-GMR regressor (``HMMGMRRegressor``), with its model files and adaptation, and its
 hierarchical form over manoeuvres (``HierarchicalHMMGMRRegressor``)."""
 
-from .._core._public import publish
 from ._hierarchical import HierarchicalHMMGMRRegressor
 from ._regressor import HMMGMRRegressor
 
 __all__ = ["HMMGMRRegressor", "HierarchicalHMMGMRRegressor"]
-
-publish(globals())

@@ -360,17 +360,13 @@ output_smoothing_
             setattr(estimator, attribute, value)
         return estimator
 
-    def to_dict(self, *, output_names=None):
-        """The fitted model as a JSON-ready dict (the portable model format).
-
-        As :meth:`HMMGMRRegressor.to_dict`, with the fitted manoeuvres' names and states in
-        ``estimator_params`` (``manoeuvres`` and ``n_states`` as lists), so that
-        :meth:`from_dict` restores the hierarchy.
-        """
-        data = super().to_dict(output_names=output_names)
-        data["estimator_params"]["manoeuvres"] = [_plain(name) for name in self.manoeuvres_]
-        data["estimator_params"]["n_states"] = [int(size) for size in self.states_per_manoeuvre_]
-        return data
+    def _portable_params(self):
+        """The parameters the model file keeps: the fitted manoeuvres' names and states
+        (``manoeuvres`` and ``n_states`` as lists), so that loading restores the hierarchy."""
+        params = super()._portable_params()
+        params["manoeuvres"] = [_plain(name) for name in self.manoeuvres_]
+        params["n_states"] = [int(size) for size in self.states_per_manoeuvre_]
+        return params
 
 
 def _manoeuvre_names(manoeuvres, labels=None):

@@ -4,12 +4,17 @@ The estimator's own constructor from a :class:`~skhmmgmr.FittedHMMGMR` lives her
 exporter lives with its owner and the estimator's method is one line that delegates: the
 portable JSON format to :mod:`skhmmgmr._hmm._portable` (the regressor's block of the format of
 :mod:`skhmmgmr.portable`), hmmlearn to :mod:`skhmmgmr._hmm._hmmlearn`, the stream to
-:class:`~skhmmgmr.FilterStream`.
+:class:`~skhmmgmr.FilterStream`. The model file is written and read by
+:func:`skhmmgmr.portable.save` and :func:`~skhmmgmr.portable.load`; the estimator's JSON
+methods (``to_dict``, ``from_dict``, ``export_json``, ``from_json``) are their deprecated
+aliases, kept for one release. The mixin's two hooks say what the file keeps of an estimator:
+its ``model_type`` (``_portable_type``) and its parameters (``_portable_params``).
 """
 
 import numpy as np
 
 from .._core._compat import validate_parameter_constraints
+from .._core._deprecation import deprecated_alias
 from .._hmm._hmmlearn import estimator_from_hmmlearn, estimator_to_hmmlearn
 from .._hmm._portable import (
     REGRESSOR_TYPE,
@@ -18,7 +23,32 @@ from .._hmm._portable import (
     estimator_to_dict,
     export_json,
 )
+from .._hmm._readout import fixed_decay, time_constant_of
 from ..streaming import FilterStream
+
+_SAVE = "write the model file with skhmmgmr.portable.save(model, path)"
+_LOAD = "read the model file with skhmmgmr.portable.load(path)"
+_AS_DICT = "(json.load of the file gives its dict)"
+
+
+def with_read_out(model, output_smoothing):
+    """``model`` with the read-out that ``output_smoothing`` gives (a fitted estimator's
+    parameter): a time constant is applied to a model without a read-out and must agree with
+    the read-out of a model that has one; None and "auto" (the read-out fit chose) keep the
+    model's."""
+    if output_smoothing is None or isinstance(output_smoothing, str):
+        return model
+    decay = fixed_decay(output_smoothing)
+    if not model.smoothed:
+        return model.with_output_decay(np.full(model.n_outputs, decay)) if decay else model
+    if not np.allclose(model.output_decay, decay, rtol=1e-12, atol=0):
+        held = [round(time_constant_of(a), 6) for a in model.output_decay.tolist()]
+        raise ValueError(
+            f"output_smoothing={output_smoothing!r} asks for a read-out of time constant "
+            f"{output_smoothing!r} rows, but the model's read-out has the time constant(s) "
+            f"{held}: give output_smoothing=None to keep the model's read-out"
+        )
+    return model
 
 
 class ModelIOMixin:
@@ -36,12 +66,21 @@ class ModelIOMixin:
         model : FittedHMMGMR
         **params : dict
             Estimator parameters (``get_params()`` keys); ``n_states`` and
-            ``covariance_type`` are taken from the model.
+            ``covariance_type`` are taken from the model. A time constant ``output_smoothing``
+            gives a model without a read-out (``model.output_decay`` zero) that read-out, and
+            must agree with the read-out of a model that has one; None and "auto" keep the
+            model's.
 
         Returns
         -------
         estimator : HMMGMRRegressor
-            Fitted: predicts, streams and exports as ``model`` does.
+            Fitted: predicts, streams and exports as ``model`` does (with the read-out of
+            ``output_smoothing``).
+
+        Raises
+        ------
+        ValueError
+            If ``output_smoothing`` is a time constant that differs from the model's read-out.
 
         Examples
         --------
@@ -59,7 +98,7 @@ class ModelIOMixin:
         validate_parameter_constraints(
             cls._parameter_constraints, estimator.get_params(deep=False), caller_name=cls.__name__
         )
-        estimator.model_ = model
+        estimator.model_ = with_read_out(model, estimator.output_smoothing)
         estimator.n_features_in_ = model.n_inputs
         if model.feature_names is not None:
             estimator.feature_names_in_ = np.asarray(model.feature_names, dtype=object)
@@ -82,7 +121,9 @@ class ModelIOMixin:
         feature_names : list of str, default=None
             Names of the inputs (then ``predict`` takes a DataFrame with these columns).
         **params : dict
-            Other estimator parameters.
+            Other estimator parameters. A time constant ``output_smoothing`` gives the
+            estimate its read-out; "auto", which chooses the read-out from the training
+            recordings in ``fit``, is refused.
 
         Returns
         -------
@@ -155,53 +196,57 @@ class ModelIOMixin:
         """
         return FilterStream(self, **kwargs)
 
+    def _portable_params(self):
+        """The parameters the model file keeps (``estimator_params``)."""
+        return self.get_params()
+
+    @deprecated_alias("HMMGMRRegressor.to_dict", f"{_SAVE} {_AS_DICT}")
     def to_dict(self, *, output_names=None):
         """The fitted model as a JSON-ready dict (the portable model format).
 
-        The dict holds everything the causal filter needs (see :mod:`skhmmgmr.portable` for
-        the keys and their units) and everything :meth:`from_dict` needs to restore the
-        estimator.
+        .. deprecated:: 0.2
+           ``to_dict`` will be removed in 0.3: :func:`skhmmgmr.portable.save` writes the
+           model file (``json.load`` of the file gives this dict).
 
         Parameters
         ----------
         output_names : list of str, default=None
-            Names of the outputs; ``output_0``, ... when None.
+            Names of the outputs; those of ``y`` in ``fit`` (``output_names_``), else
+            ``output_0``, ... when None.
 
         Returns
         -------
         data : dict
             Nested dicts, lists, strings and finite numbers only.
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from skhmmgmr import HMMGMRRegressor
-        >>> X = np.cumsum(np.random.default_rng(0).normal(size=(200, 2)), axis=0)
-        >>> model = HMMGMRRegressor(n_states=2, random_state=0).fit(X, X.sum(axis=1))
-        >>> restored = HMMGMRRegressor.from_dict(model.to_dict(output_names=["torque"]))
-        >>> bool(np.array_equal(restored.predict(X), model.predict(X)))
-        True
         """
-        return estimator_to_dict(self, model_type=self._portable_type, output_names=output_names)
+        return estimator_to_dict(self, output_names=output_names)
 
+    @deprecated_alias("HMMGMRRegressor.export_json", _SAVE)
     def export_json(self, path, *, output_names=None):
         """Write the portable model file (strict JSON) to ``path``.
+
+        .. deprecated:: 0.2
+           ``export_json`` will be removed in 0.3: call
+           ``skhmmgmr.portable.save(model, path, output_names=...)``, which writes the same
+           file.
 
         Parameters
         ----------
         path : str or path-like
         output_names : list of str, default=None
-            Names of the outputs; ``output_0``, ... when None.
-
-        See Also
-        --------
-        from_json : restore the estimator from the file.
+            Names of the outputs; those of ``y`` in ``fit`` (``output_names_``), else
+            ``output_0``, ... when None.
         """
-        export_json(self.to_dict(output_names=output_names), path)
+        export_json(estimator_to_dict(self, output_names=output_names), path)
 
     @classmethod
+    @deprecated_alias("HMMGMRRegressor.from_dict", f"{_LOAD} {_AS_DICT}")
     def from_dict(cls, data):
-        """Restore a fitted estimator from :meth:`to_dict` output.
+        """Restore a fitted estimator from the dict of a model file.
+
+        .. deprecated:: 0.2
+           ``from_dict`` will be removed in 0.3: read the file with
+           :func:`skhmmgmr.portable.load`.
 
         Parameters
         ----------
@@ -215,15 +260,18 @@ class ModelIOMixin:
         Raises
         ------
         ValueError
-            If ``data`` is not a dict, lacks a key, has a wrong shape, non-finite numbers or
-            inconsistent parameters, or is of another format version; the message names the
-            key.
+            If ``data`` is not a valid model file of this class; the message names the key.
         """
-        return estimator_from_dict(cls, data, model_type=cls._portable_type)
+        return estimator_from_dict(cls, data)
 
     @classmethod
+    @deprecated_alias("HMMGMRRegressor.from_json", _LOAD)
     def from_json(cls, path):
-        """Restore a fitted estimator from a file written by :meth:`export_json`.
+        """Restore a fitted estimator from a model file.
+
+        .. deprecated:: 0.2
+           ``from_json`` will be removed in 0.3: call ``skhmmgmr.portable.load(path)``,
+           which reads every model file.
 
         Parameters
         ----------
@@ -236,7 +284,7 @@ class ModelIOMixin:
         Raises
         ------
         ValueError
-            If the file is not valid JSON or not a valid model file (see :meth:`from_dict`);
-            the message names the file and the key.
+            If the file is not valid JSON or not a valid model file of this class; the
+            message names the file and the key.
         """
         return estimator_from_json(cls, path)

@@ -64,8 +64,15 @@ def read_joint_inputs(estimator, X, y, groups, time, *, fitting):
 
     A ``y`` with an index is paired with a panel ``X`` by label; a NaN target is refused
     unless the estimator reads missing values, naming the column and recording, as is a NaN
-    or infinite input.
+    or infinite input. ``fit`` remembers the names of the outputs (``output_names_``, see
+    :func:`target_names`).
     """
+    names_of_y = target_names(y)
+    if fitting:
+        if names_of_y is not None:
+            estimator.output_names_ = np.asarray(names_of_y, dtype=object)
+        elif hasattr(estimator, "output_names_"):
+            del estimator.output_names_
     layout = read_layout(X, groups, time, canonical=fitting)
     y = align_target(X, y, layout)
     X, y, groups = layout.to_filter_order(X), layout.to_filter_order(y), layout.groups
@@ -82,12 +89,26 @@ def read_joint_inputs(estimator, X, y, groups, time, *, fitting):
             warn_if_one_long_recording(estimator, X.shape[0])
     recordings = layout.recordings(X.shape[0], min_length=2 if fitting else 1)
     input_names = column_names_of(estimator, X.shape[1])
-    output_names = [f"output {i}" for i in range(Y.shape[1])]
+    output_names = names_of_y or [f"output {i}" for i in range(Y.shape[1])]
     for values, name, names in ((X, "X", input_names), (Y, "y", output_names)):
         check_finite(
             values, name=name, column_names=names, recordings=recordings, allow_nan=allow_nan
         )
     return JointInputs(X, Y, y.ndim == 1, recordings, groups is not None, input_names, output_names)
+
+
+def target_names(y):
+    """The names of the outputs ``y`` carries: a pandas Series' name, a DataFrame's columns,
+    when every one is text (as scikit-learn reads ``feature_names_in_`` from ``X``); else
+    None."""
+    columns = getattr(y, "columns", None)
+    if columns is not None:
+        names = list(columns)
+    elif hasattr(y, "name") and hasattr(y, "index"):  # a Series
+        names = [y.name]
+    else:
+        return None
+    return names if names and all(isinstance(name, str) for name in names) else None
 
 
 def warn_if_one_long_recording(estimator, n_samples):

@@ -12,6 +12,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._core._compat import FiniteInterval, Interval, StrOptions, _fit_context
 from .._core._panel import align_target
+from .._core._pickled import PickleVersionMixin
 from .._core._validation import (
     check_column_scales,
     check_enough_rows,
@@ -36,7 +37,9 @@ from ._io import ModelIOMixin
 from ._prediction_inputs import read_inputs, read_joint_inputs
 
 
-class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstimator):
+class HMMGMRRegressor(
+    PickleVersionMixin, AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin, BaseEstimator
+):
     """Hidden Markov Model + Gaussian Mixture Regression (HMM-GMR) regressor.
 
     A fully connected hidden Markov model with one Gaussian per state (a full covariance per
@@ -133,6 +136,9 @@ class HMMGMRRegressor(AdaptMixin, ModelIOMixin, TransformerMixin, RegressorMixin
         Input names, when ``X`` has string column names.
     n_outputs_ : int
         Number of outputs (columns of ``y``).
+    output_names_ : ndarray of shape (n_outputs,)
+        Output names, when ``y`` has them: a pandas Series' name, a DataFrame's string
+        column names. :func:`skhmmgmr.portable.save` writes them in the model file.
     n_iter_ : int
         EM iterations of the kept initialisation.
     converged_ : bool

@@ -5,7 +5,6 @@ The definitions (RMSE, accuracy, smoothness, the D.5 normalisation) are in the d
 ``_table.py``.
 """
 
-from .._core._public import publish
 from ._lane_keeping import LANE_KEEPING_METRICS, lane_keeping_metrics
 from ._scorers import (
     AccuracyScore,
@@ -40,5 +39,3 @@ __all__ = [
     "smoothness_score",
     "trade_offs",
 ]
-
-publish(globals())

@@ -1,6 +1,5 @@
 """``FilterStream``: the causal GMR filter one sample at a time, for a control loop."""
 
-from .._core._public import publish
 from ._filter import (
     FLAG_MISSING,
     FLAG_NON_FINITE,
@@ -18,5 +17,3 @@ __all__ = [
     "FLAG_RESTARTED",
     "FilterStream",
 ]
-
-publish(globals())

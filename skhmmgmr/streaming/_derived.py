@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from .._core._sequences import as_recordings
+from .._core._validation import check_filter_period
 
 SETTINGS = (
     "n_features_in",
@@ -131,13 +132,12 @@ def check_time_steps(time, recordings, step):
         if stop - start < 2:
             continue
         median = float(np.median(np.diff(time[start:stop])))
-        if abs(median - period) > 0.01 * period:
-            raise ValueError(
-                f"The time level of X steps {median:.6g} s (median) in recording {rec!r}, but "
-                f"sampling_period={period!r}: the velocity filter would run "
-                f"{period / median:.3g} times too fast or slow. Pass the "
-                "recordings' own period, or resample them (resample_recordings)."
-            )
+        check_filter_period(
+            median,
+            period,
+            what=f"The time level of X steps {median:.6g} s (median) in recording {rec!r}",
+            remedy="Pass the recordings' own period, or resample them (resample_recordings).",
+        )
 
 
 def stream_capable(step):

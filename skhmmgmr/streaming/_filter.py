@@ -29,6 +29,7 @@ import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
 from .._core._panel import align_target, read_layout, recordings_of
+from .._core._pickled import PickleVersionMixin
 from .._hmm._fitted import FittedHMMGMR
 from .._hmm._missing import gmr_given_observed
 from .._hmm._stale_inputs import MISSING_VALUES, carried_inputs
@@ -46,7 +47,7 @@ _LEARNED_FLAGS = (FLAG_OK, FLAG_RESTARTED)
 _MAX_STANDARDISED = 1e100
 
 
-class FilterStream:
+class FilterStream(PickleVersionMixin):
     """Causal HMM-GMR filter of a fitted :class:`~skhmmgmr.HMMGMRRegressor`, one sample a call.
 
     Streaming a recording sample by sample gives the estimates of ``model.predict`` on the whole
@@ -277,7 +278,7 @@ class FilterStream:
 
     def __setstate__(self, state):
         """Unpickle, then link the buffer views again (pickling copies every view)."""
-        self.__dict__.update(state)
+        super().__setstate__(state)
         n_inputs, n_whitened = self._z.shape[0] - 1, self._squares.shape[0] - 1
         # a stream pickled before pipelines streamed reads the regressor's rows
         self.__dict__.setdefault("_stages", ())

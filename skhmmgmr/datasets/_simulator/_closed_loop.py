@@ -1,0 +1,151 @@
+"""The closed loop: a driver, the steering system and the vehicle stepped together by
+semi-implicit Euler at the integration rate, their states logged at the sampling rate.
+
+At every integration step the driver (:func:`._driver.human_steering`, or a torque source
+called at every logged sample) gives the torque at the steering wheel; the vehicle
+(:func:`._vehicle.single_track`) gives the tyres' aligning torque and its own rates from the
+road wheels' angle; the steering column (:func:`._steering.steering_column`) turns the two
+torques into the wheel's acceleration; then every state moves on by one step. The log has
+one row per sample, its columns :data:`LOG_COLUMNS`.
+"""
+
+import math
+
+import numpy as np
+
+from ._driver import human_steering
+from ._steering import steering_column
+from ._vehicle import single_track
+
+LOST_CONTROL = 10.0  # [m] lateral deviation at which the simulation stops
+#: The columns of a simulation's log: the steering wheel's angle, velocity and acceleration,
+#: the vehicle's lateral velocity and acceleration, yaw rate and acceleration, roll angle,
+#: velocity and acceleration, its arc length along the road, its lateral and heading
+#: deviations from the road's centreline, and the torque the torque sensor reads.
+LOG_COLUMNS = (
+    "theta",
+    "theta_d",
+    "theta_dd",
+    "v",
+    "a_y",
+    "r",
+    "r_d",
+    "phi",
+    "phi_d",
+    "phi_dd",
+    "s",
+    "e_y",
+    "e_psi",
+    "torque",
+)
+#: The logged columns a simulation starts from (``initial``), followed by the sensed torque
+#: of the sample before.
+INITIAL_COLUMNS = ("theta", "theta_d", "theta_dd", "v", "r", "phi", "phi_d", "s", "e_y", "e_psi")
+
+
+def simulate(section, n_samples, torque_source=None, initial=None, column_log=None):
+    """Integrate the closed loop of ``section`` for ``n_samples`` samples; return the log,
+    an array (n_samples, 14) of :data:`LOG_COLUMNS`.
+
+    ``torque_source``: another driver than the human of ``section.parameters``, called at
+    every logged sample as ``torque_source(row, states)`` with the states of the logged
+    columns but the torque (the steering-wheel acceleration of the integration step before);
+    its torque acts at the steering wheel until the next sample. It may lose control: the log
+    then ends at the sample where the lateral deviation first exceeds :data:`LOST_CONTROL`.
+
+    ``initial`` (with a ``torque_source`` only): start from a logged state instead of rest,
+    the values of :data:`INITIAL_COLUMNS` and the sensed torque of the integration step
+    before (which sets the power assist's gain), followed, with a torsion bar, by the lower
+    column's ``(theta_c, theta_c_d)`` at that sample (from ``column_log``); without them the
+    lower column starts at the bar's static twist under that torque, turning with the wheel
+    (exact at rest only).
+    ``column_log``: an array (n_samples, 2) that receives ``(theta_c, theta_c_d)`` at every
+    logged sample (with a torsion bar; the rigid column writes the wheel's angle and velocity).
+    The logged torque is the torque sensor's: the driver's (the human's, or the torque
+    source's) with a rigid column; the torsion bar's ``k_c (theta - theta_c) + c_c (theta' -
+    theta_c')`` at the sample with a ``column_stiffness``, ``theta_c`` being the lower
+    column's angle (see :mod:`._vehicle`).
+    """
+    vehicle, dt, n_sub, road = section.vehicle, section.dt, section.n_sub, section.road
+    human = None
+    if torque_source is None:
+        if initial is not None:
+            raise ValueError("initial needs a torque_source (a human starts at rest)")
+        driver = section.parameters
+        human = human_steering(
+            driver, vehicle, road, section.offsets, section.speed, dt, section.remnants
+        )
+        bar_torque, column = steering_column(vehicle, dt, driver.arm_inertia, driver.arm_damping)
+    else:  # a torque source has no arm impedance of its own
+        bar_torque, column = steering_column(vehicle, dt, 0.0, 0.0)
+    rates = single_track(vehicle, section.speed)
+    curv, inv_ds = road.curvature.tolist(), 1.0 / (road.s[1] - road.s[0])
+    start = _start(initial, vehicle)
+    theta, theta_d, theta_dd, v, r, phi, phi_d, s, e_y, e_psi, sensed, theta_c, theta_c_d = start
+    s_d = e_y_d = e_psi_d = t_hand = 0.0
+    log = np.empty((n_samples, len(LOG_COLUMNS)))
+    row = 0
+    for k in range(n_samples * n_sub):
+        sample = k % n_sub == 0
+        if sample and abs(e_y) > LOST_CONTROL:
+            if human is None:
+                return log[:row]
+            raise RuntimeError(
+                f"The driver lost control {k * dt:.1f} s into the recording "
+                f"(lateral deviation {e_y:.1f} m); driver parameters: {section.parameters}."
+            )
+        if human is not None:
+            t_hand = human(k, s, e_y, e_psi, s_d, e_y_d, e_psi_d, theta)
+        x = s * inv_ds
+        i = int(x)
+        kappa = curv[i] + (x - i) * (curv[i + 1] - curv[i])
+        # tyres, aligning torque, vehicle (none of which depends on this step's torque)
+        aligning, v_d, r_d, a_y, phi_dd, s_d, e_y_d = rates(
+            theta if bar_torque is None else theta_c, v, r, phi, phi_d, e_y, e_psi, kappa
+        )
+        if bar_torque is not None:  # the torque sensor reads the torsion bar
+            sensed = bar_torque(theta, theta_d, theta_c, theta_c_d)
+        if sample:
+            body = (v, a_y, r, r_d, phi, phi_d, phi_dd, s, e_y, e_psi)
+            if column_log is not None:  # the lower column with the logged states
+                column_log[row] = (theta, theta_d) if bar_torque is None else (theta_c, theta_c_d)
+            if human is None:
+                states = (theta, theta_d, theta_dd, *body)
+                t_hand = torque_source(row, states)
+                log[row] = (*states, t_hand if bar_torque is None else sensed)
+                row += 1
+        # the torque at the steering wheel enters the column here, and only here
+        theta_dd, theta_c, theta_c_d, sensed = column(
+            t_hand, sensed, aligning, theta_d, theta_c, theta_c_d
+        )
+        if human is not None and sample:
+            log[row] = (theta, theta_d, theta_dd, *body, sensed)
+            row += 1
+        theta_d += dt * theta_dd
+        theta += dt * theta_d
+        v += dt * v_d
+        r += dt * r_d
+        phi_d += dt * phi_dd
+        phi += dt * phi_d
+        s += dt * s_d
+        e_y += dt * e_y_d
+        e_psi_d = r - kappa * s_d
+        e_psi += dt * e_psi_d
+    return log
+
+
+def _start(initial, vehicle):
+    """The states the loop starts from: rest, or ``initial`` (see :func:`simulate`), as
+    ``INITIAL_COLUMNS``, the sensed torque and the lower column's angle and velocity."""
+    if initial is None:
+        return (0.0,) * 13
+    values = tuple(map(float, initial))
+    start = values[:11]
+    if not math.isfinite(vehicle.column_stiffness):  # a rigid column has no lower column
+        return (*start, 0.0, 0.0)
+    if len(values) == 13:
+        return values
+    # No lower-column state given: the torsion bar's static twist under the logged torque,
+    # turning with the wheel (exact at rest only).
+    theta, theta_d, sensed = start[0], start[1], start[10]
+    return (*start, theta - sensed / vehicle.column_stiffness, theta_d)
