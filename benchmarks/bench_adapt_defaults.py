@@ -66,20 +66,27 @@ FAR = 1.0  # [points] a fresh fit on 5 minutes this much above the generic model
 
 
 def recordings(style, sections, seed, vehicle):
-    """Frames of ``sections`` (split, setting, duration) driven by ``style`` in ``vehicle``."""
+    """Frames of ``sections`` (split, setting, duration) driven by ``style`` in ``vehicle``; a
+    recording in which the driver loses control is driven again with the next seed."""
     rng = np.random.default_rng(seed)
     frames = []
     for i, (split, setting, duration) in enumerate(sections):
-        frame = make_lane_keeping(
-            duration,
-            setting=setting,
-            driver=style,
-            sampling_rate=RATE,
-            random_state=int(rng.integers(2**31 - 1)),
-            recording=f"{style}-{split}-{i:02d}",
-            split=split,
-            vehicle=vehicle,
-        )
+        for attempt in range(10):
+            try:
+                frame = make_lane_keeping(
+                    duration,
+                    setting=setting,
+                    driver=style,
+                    sampling_rate=RATE,
+                    random_state=int(rng.integers(2**31 - 1)),
+                    recording=f"{style}-{split}-{i:02d}",
+                    split=split,
+                    vehicle=vehicle,
+                )
+                break
+            except RuntimeError:
+                if attempt == 9:
+                    raise
         frames.append(frame)
     return pd.concat(frames, ignore_index=True)
 

@@ -130,13 +130,13 @@ class AdaptMixin:
         1024, 256, 64, 16 and 4, and for a fresh fit of the estimator on the recordings
         alone (``relevance=0``). A candidate's held-out error is the root mean squared error
         of its estimate in every tenth of a held-out block, averaged; the strongest candidate
-        within 2.5 standard errors of the best is chosen (the one-standard-error rule,
-        towards the fitted model) and then adapts to all the rows; ``adaptation_`` keeps the
-        table. A driver
-        like the fitted model's keeps it as it is; one far from it moves it as far as the
-        held-out rows support, up to a model of its own. The choice costs about 55 single
-        adaptations (8 folds of 6 MAP EM runs and a fit, each followed by a prediction):
-        1-2 s for 1-5 minutes at 20 Hz, K=5, 5 inputs (see :doc:`/user_guide/adaptation`).
+        within two standard errors of the best score is chosen (the one-standard-error
+        rule, towards the fitted model) and then adapts to all the rows; ``adaptation_``
+        keeps the table. A driver like the fitted model's keeps it as it is; one far from it
+        moves it as far as the held-out rows support, up to a model of its own. The choice
+        costs about 55 single adaptations (8 folds of 6 MAP EM runs and a fit, each followed
+        by a prediction): 1-3 s for 1-5 minutes at 20 Hz, K=5, 5 inputs (see
+        :doc:`/user_guide/adaptation`).
 
         This is not ``partial_fit``: in scikit-learn ``partial_fit`` learns incrementally
         towards the fit of all the data seen so far, whereas ``adapt`` treats the fitted
@@ -187,8 +187,8 @@ class AdaptMixin:
             recordings), and ``adaptation_``: the table of the "auto" choice, one row per
             candidate with ``parameters``, ``relevance`` (``inf``: not adapted; ``0``: a
             fresh fit), ``validation_rmse`` (the held-out error, in units of the output's
-            standard deviation at fit), ``difference_se`` (standard error of its difference
-            to the best) and ``chosen``; None when neither is "auto". After a fresh fit the
+            standard deviation at fit), ``validation_se`` (its standard error) and
+            ``chosen``; None when neither is "auto". After a fresh fit the
             likelihood attributes are the fit's (``penalized_log_likelihood_`` among them).
 
         Examples
@@ -204,7 +204,7 @@ class AdaptMixin:
         True
         >>> choice = model.adapt(X[:200], y[:200] + 0.5).adaptation_  # how far: "auto"
         >>> choice.columns.tolist()
-        ['parameters', 'relevance', 'validation_rmse', 'difference_se', 'chosen']
+        ['parameters', 'relevance', 'validation_rmse', 'validation_se', 'chosen']
         """
         check_is_fitted(self)
         relevance, parameters = check_strength(relevance, parameters)
