@@ -261,7 +261,7 @@ def test_held_samples_are_those_of_the_filter_stream(exported, protocol):
     X = protocol.loc[first, inputs].to_numpy(copy=True)
     X[[0, 7, 40], 0] = np.nan
     X[12, -1] = np.inf
-    X[[20, 21]] *= 1e7
+    X[[20, 21], 0] = 1e101  # out of the model's range (its cube still finite): held, code 2
     run = exported.simulate(X, np.zeros(len(X)))
     # expected: the stream on what the FMU sampled (FMPy's interpolation of the signal spreads
     # a NaN to the neighbouring communication point at times)
