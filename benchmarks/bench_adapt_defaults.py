@@ -48,7 +48,7 @@ import numpy as np
 import pandas as pd
 
 # the same features, rate, arrays and scores as the adaptation benchmark
-from bench_adaptation import arrays, scores
+from bench_adaptation import arrays, scores, simulate
 from bench_ahead import FEATURES
 from joblib import Parallel, delayed
 from sklearn.exceptions import ConvergenceWarning
@@ -65,32 +65,6 @@ N_STATES = 5
 FAR = 1.0  # [points] a fresh fit on 5 minutes this much above the generic model: far
 
 
-def recordings(style, sections, seed, vehicle):
-    """Frames of ``sections`` (split, setting, duration) driven by ``style`` in ``vehicle``; a
-    recording in which the driver loses control is driven again with the next seed."""
-    rng = np.random.default_rng(seed)
-    frames = []
-    for i, (split, setting, duration) in enumerate(sections):
-        for attempt in range(10):
-            try:
-                frame = make_lane_keeping(
-                    duration,
-                    setting=setting,
-                    driver=style,
-                    sampling_rate=RATE,
-                    random_state=int(rng.integers(2**31 - 1)),
-                    recording=f"{style}-{split}-{i:02d}",
-                    split=split,
-                    vehicle=vehicle,
-                )
-                break
-            except RuntimeError:
-                if attempt == 9:
-                    raise
-        frames.append(frame)
-    return pd.concat(frames, ignore_index=True)
-
-
 def drive(vehicle, generic_minutes, seed):
     """Every style's recordings in ``vehicle`` (None: the reference car)."""
     data = {}
@@ -98,7 +72,7 @@ def drive(vehicle, generic_minutes, seed):
         sections = [("train", 1 + i % 6, 60.0) for i in range(generic_minutes)]
         sections += [("adapt", 1 + i, 60.0) for i in range(max(MINUTES))]
         sections += [("validation", 7, 120.0)] * 2 + [("test", 7, 120.0)] * 3
-        data[style] = recordings(style, sections, seed * 10 + s, vehicle)
+        data[style] = simulate(style, style, sections, seed * 10 + s, vehicle)
     return data
 
 
