@@ -155,7 +155,8 @@ from ._hmm._portable import (
 )
 from ._version import __version__
 from .estimator import HierarchicalHMMGMRRegressor, HMMGMRRegressor
-from .torque_pipeline import SteeringFeatures, TorquePipeline, restore_steering_features
+from .torque_pipeline import SteeringFeatures, TorquePipeline
+from .torque_pipeline._steering_features import restore_steering_features
 
 __all__ = [
     "FIT_INFO_KEYS",
@@ -470,7 +471,7 @@ def _model_dict(fitted, *, output_names, units, period):
     model = estimator_to_dict(regressor, output_names=output_names)
     steps.append({"name": str(last_name), "type": model["model_type"], "model": model})
     if period is None:
-        periods = [step.sampling_period for _, step in transformers]
+        periods = [step.sampling_period_ for _, step in transformers]
         period = next((p for p in periods if p is not None), None)
     names = [*_inputs_of(steps[0]), *model["output_names"]]
     return {
@@ -517,8 +518,9 @@ def _plain(value):
 
 
 def _fitted_param(step, key):
-    """A parameter of a fitted ``SteeringFeatures``, the value chosen in place of ``"auto"``."""
-    if key in ("friction_velocity", "velocity_filter"):
+    """A parameter of a fitted ``SteeringFeatures``, the value chosen in place of ``"auto"``
+    (or, for the sampling period, read from the training rows' time)."""
+    if key in ("friction_velocity", "velocity_filter", "sampling_period"):
         return getattr(step, f"{key}_")
     return getattr(step, key)
 

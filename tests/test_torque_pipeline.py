@@ -2,6 +2,7 @@
 the regressor fitted on the same columns by hand, model selection over the pipeline, and the
 derived inputs as ordinary features of the selection framework."""
 
+import functools
 import math
 import pickle
 
@@ -430,6 +431,7 @@ def test_the_performance_score_predicts_the_pipeline_once(monkeypatch):
     calls = []
     original = HMMGMRRegressor.predict
 
+    @functools.wraps(original)  # its signature: what metadata routing reads
     def counted(self, *args, **kwargs):
         calls.append(1)
         return original(self, *args, **kwargs)

@@ -61,9 +61,13 @@ def _model_identifier(name, path):
 
 
 def _model_period(fitted):
-    """The ``sampling_period`` a pipeline's steps were given (the first one set), or None."""
+    """The sampling period a pipeline's steps use (the first one set: given, or read from the
+    training rows' time, ``sampling_period_``), or None."""
     steps = fitted.steps if isinstance(fitted, Pipeline) else []
-    periods = [getattr(step, "sampling_period", None) for _, step in steps]
+    periods = [
+        getattr(step, "sampling_period_", getattr(step, "sampling_period", None))
+        for _, step in steps
+    ]
     return next((float(p) for p in periods if p is not None), None)
 
 

@@ -177,7 +177,7 @@ def _derived_inputs(features, regressor):
     )
     decay = None
     if features.friction_velocity is not None and features.velocity_filter_ is not None:
-        decay = math.exp(-features.sampling_period / features.velocity_filter_)
+        decay = math.exp(-features.sampling_period_ / features.velocity_filter_)
     derived = DerivedInputs(friction, powers, decay)
     expected = list(features.get_feature_names_out())
     given = getattr(regressor, "feature_names_in_", None)
