@@ -25,10 +25,12 @@ The constants were chosen on ``benchmarks/bench_adapt_defaults.py`` (simulated d
 out of a generic model in four cars, 1 to 5 minutes of adaptation data, data seeds 0-2) and
 checked on seeds 3 and 4: eight folds rather than two to five, whose adaptations see too few
 rows to judge the weak priors and the fresh fit; the chunks' root mean squared errors rather
-than their squared errors, whose few large values make the standard error wide; two standard
-errors, the smallest factor with one case (of 180) more than 0.1 point below the generic
-model. With fewer than two held-out chunks (a handful of rows) there is no standard error,
-and the model is not adapted.
+than their squared errors, whose few large values make the standard error wide; the standard
+error of the best candidate's score rather than of each candidate's difference to it, which
+let a noisy candidate through; two standard errors (one and a half left three cases of 108
+more than 0.1 point below the generic model, two one case, and none of the 72 of seeds 3 and
+4). With fewer than two held-out chunks (a handful of rows) there is no standard error, and
+the model is not adapted.
 """
 
 import numbers
