@@ -13,7 +13,8 @@ from ._panel import RecordingLayout, recordings_of
 
 # Parameters of the methods that adapt a fitted model or forecast with it (not estimator
 # parameters, so that they are checked where they are passed): one set of constraints, so that
-# a stream, adapt and predict_ahead refuse the same values with the same message.
+# a stream, adapt and predict_ahead refuse the same values with the same message. The
+# relevance is a stream's; adapt's also takes inf, 0 and "auto" (estimator/_adaptation_choice).
 ADAPTATION_CONSTRAINTS = {
     "relevance": [Interval(numbers.Real, 0, None, closed="neither")],
     "forgetting": [Interval(numbers.Real, 0, 1, closed="right")],
@@ -76,12 +77,10 @@ def check_finite(values, *, name, column_names, recordings, allow_nan=False):
     row, column = int(rows[0]), int(columns[0])
     bad_value = values[row, column]
     kind = "NaN" if np.isnan(bad_value) else "infinity"
-    recording = recordings.recording_of_row(row)
-    start = int(recordings.starts[np.searchsorted(recordings.stops, row, side="right")])
     n_bad = int((~finite).sum())
     raise ValueError(
-        f"Input {name} contains {kind} in column {column_names[column]!r} of recording "
-        f"{_shown(recording)} (row {row - start} of the recording, row {row} overall; {n_bad} "
+        f"Input {name} contains {kind} in column {column_names[column]!r} of "
+        f"{row_location(recordings, row)[:-1]}; {n_bad} "
         + (
             "infinite value(s) in all). An infinity is not a missing value: replace it by NaN "
             "or drop it."
@@ -89,6 +88,17 @@ def check_finite(values, *, name, column_names, recordings, allow_nan=False):
             else "non-finite value(s) in all). Fill or drop them before fitting or predicting: "
             "a NaN or infinity cannot be filtered."
         )
+    )
+
+
+def row_location(recordings, row):
+    """Where ``row`` (a position in filter order) is, for a message: ``"recording 'a' (row 3
+    of the recording, row 203 overall)"``."""
+    index = int(np.searchsorted(recordings.stops, row, side="right"))
+    start = int(recordings.starts[index])
+    return (
+        f"recording {_shown(recordings.ids[index])} (row {row - start} of the recording, "
+        f"row {row} overall)"
     )
 
 

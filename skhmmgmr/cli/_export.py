@@ -50,8 +50,9 @@ def command_export_c(args):
     _checked_files(args, folder, [f"{name}.h", f"{name}.c"], option=f"--name {name}:")
     made = _missing_folders(folder)
     try:
-        folder.mkdir(parents=True, exist_ok=True)  # write_c writes into an existing folder
-        header, source = write_c(model, folder, name=name, dtype=args.dtype)
+        header, source = write_c(
+            model, folder, name=name, dtype=args.dtype, overwrite=args.overwrite
+        )
     except (ValueError, OSError) as exc:
         for empty in made:  # a refused model leaves nothing behind
             try:

@@ -45,6 +45,11 @@ class HierarchicalHMMGMRRegressor(HMMGMRRegressor):
     unlabelled rows, keeping the block structure. Without labels, the rows are first
     labelled by k-means on ``[X, y]`` (one cluster per manoeuvre) and EM runs from there.
 
+    :meth:`~HMMGMRRegressor.adapt` works as the flat model's, except that its "auto" choice is
+    among "do not adapt" and MAP adaptations of the means and covariances (the transitions, and
+    so the manoeuvres' structure, stay): a fresh fit (``relevance=0``) needs the manoeuvre
+    labels, which ``adapt`` does not take; call ``fit`` for one.
+
     Read more in the user guide, "Manoeuvres as a hierarchy".
 
     Parameters
@@ -90,6 +95,8 @@ class HierarchicalHMMGMRRegressor(HMMGMRRegressor):
         What a NaN means (see :class:`HMMGMRRegressor`).
     output_smoothing : None, float in [0, 1e6] or "auto", default=None
         Causal first-order read-out of the estimate (see :class:`HMMGMRRegressor`).
+    min_log_density : float or None, default=None
+        The outlier policy: which samples the filter holds (see :class:`HMMGMRRegressor`).
     random_state : int, RandomState instance or None, default=None
         Seed of the initialisations.
     verbose : int, default=0
@@ -166,6 +173,7 @@ output_smoothing_
         reg_covar=1e-6,
         missing_values="error",
         output_smoothing=None,
+        min_log_density=None,
         random_state=None,
         verbose=0,
     ):
@@ -181,8 +189,12 @@ output_smoothing_
         self.reg_covar = reg_covar
         self.missing_values = missing_values
         self.output_smoothing = output_smoothing
+        self.min_log_density = min_log_density
         self.random_state = random_state
         self.verbose = verbose
+
+    # A fresh fit needs the manoeuvres' labels: adapt's "auto" chooses among MAP adaptations.
+    _fits_anew = False
 
     # -- the structure: manoeuvre names and their states ----------------------------------------
     def _set_structure(self, names, sizes):

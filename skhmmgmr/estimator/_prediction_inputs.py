@@ -2,15 +2,17 @@
 for the methods that read inputs and outputs (fit, adapt, log_likelihood), :func:`read_inputs`
 for those that read inputs only (predict and the filter's other read-outs): the rows in filter
 order, their recordings, the validated values, and for a prediction the standardised inputs
-and the rows that miss a value (read once for the filter and the read-out)."""
+and the rows that miss a value (read once for the filter and the read-out); inputs out of the
+model's range are refused (:mod:`skhmmgmr._hmm._holds`)."""
 
 import warnings
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._core._panel import align_target, read_layout
+from .._core._panel import in_filter_order, read_layout
 from .._core._validation import (
     check_finite,
     check_target_finite,
@@ -18,6 +20,7 @@ from .._core._validation import (
     validate_joint,
 )
 from .._hmm._gmr import read_missing
+from .._hmm._holds import check_in_range
 from .._hmm._stale_inputs import stale_noise_for
 
 
@@ -39,6 +42,7 @@ def read_inputs(estimator, X, groups, time):
     check_finite(X, name="X", column_names=names, recordings=recordings, allow_nan=allow_nan)
     model = estimator.model_
     standardized = model.standardization.inputs(X)
+    check_in_range(standardized, column_names=names, recordings=recordings)
     noise = stale_noise_for(model, estimator.missing_values)
     return standardized, recordings, layout, read_missing(standardized, recordings, noise)
 
@@ -73,9 +77,14 @@ def read_joint_inputs(estimator, X, y, groups, time, *, fitting):
             estimator.output_names_ = np.asarray(names_of_y, dtype=object)
         elif hasattr(estimator, "output_names_"):
             del estimator.output_names_
-    layout = read_layout(X, groups, time, canonical=fitting)
-    y = align_target(X, y, layout)
-    X, y, groups = layout.to_filter_order(X), layout.to_filter_order(y), layout.groups
+    run = partial(_joint_inputs_in_filter_order, estimator, fitting=fitting, names_of_y=names_of_y)
+    return in_filter_order(run, X, groups, time=time, y=y, canonical=fitting)
+
+
+def _joint_inputs_in_filter_order(estimator, layout, X, y=None, *, fitting, names_of_y):
+    """:func:`read_joint_inputs` of rows in filter order, their recordings' ``layout``
+    (``names_of_y``: the outputs' names, :func:`target_names`)."""
+    groups = layout.groups
     allow_nan = estimator.missing_values != "error"
     check_target_finite(y, layout, allow_nan=allow_nan)
     X, y = validate_joint(estimator, X, y, allow_nan=allow_nan, reset=fitting)

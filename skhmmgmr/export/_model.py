@@ -30,6 +30,8 @@ from sklearn.exceptions import NotFittedError
 from sklearn.pipeline import Pipeline
 from sklearn.utils.validation import check_is_fitted
 
+from .._core._compat import InvalidParameterError
+from .._hmm._holds import check_min_log_density
 from ..estimator import HMMGMRRegressor
 from ..torque_pipeline import SteeringFeatures
 
@@ -72,7 +74,7 @@ class ExportedFilter:
     coef: np.ndarray
     intercept: np.ndarray
     conditional_variances: np.ndarray
-    min_log_density: float
+    min_log_density: object  # the outlier policy's threshold, None: none (_hmm._holds)
     output_decay: np.ndarray  # the first-order read-out (skhmmgmr._hmm._readout)
 
     @property
@@ -176,7 +178,7 @@ def _derived_inputs(features, regressor):
     )
     decay = None
     if features.friction_velocity is not None and features.velocity_filter_ is not None:
-        decay = math.exp(-features.sampling_period / features.velocity_filter_)
+        decay = math.exp(-features.sampling_period_ / features.velocity_filter_)
     derived = DerivedInputs(friction, powers, decay)
     expected = list(features.get_feature_names_out())
     given = getattr(regressor, "feature_names_in_", None)
@@ -244,7 +246,7 @@ def read_filter(fitted):
         coef=np.array(params.coef),
         intercept=np.array(params.intercept),
         conditional_variances=np.array(params.conditional_variances),
-        min_log_density=math.log(np.finfo(float).tiny),
+        min_log_density=_min_log_density(regressor),
         output_decay=np.array(model.output_decay),
     )
     for field in ("gating", "offsets", "norms", "coef", "intercept", "conditional_variances"):
@@ -253,8 +255,31 @@ def read_filter(fitted):
     return exported
 
 
+# The headers of the C standard library (C99, C11, C23): a generated ``<name>.h`` of one of
+# these names, in a folder on the include path, would hide it (also on a file system that
+# ignores case).
+STANDARD_HEADERS = frozenset(
+    "assert complex ctype errno fenv float inttypes iso646 limits locale math setjmp signal "  # noqa: SIM905
+    "stdalign stdarg stdatomic stdbit stdbool stdckdint stddef stdint stdio stdlib "
+    "stdnoreturn string tgmath threads time uchar wchar wctype".split()
+)
+
+
+def _min_log_density(regressor):
+    """The regressor's ``min_log_density``, checked. Its error is a plain ValueError: the
+    exporter's ``validate_params`` would take an InvalidParameterError for one of its own
+    arguments and name the exporter in place of the regressor."""
+    try:
+        return check_min_log_density(
+            getattr(regressor, "min_log_density", None), type(regressor).__name__
+        )
+    except InvalidParameterError as exc:
+        raise ValueError(f"{exc} The model cannot be exported.") from exc
+
+
 def check_name(name):
-    """``name`` if it is a C identifier that may prefix the generated names, else ValueError."""
+    """``name`` if it is a C identifier that may prefix the generated names and name the
+    files, else ValueError."""
     if (
         not isinstance(name, str)
         or not name
@@ -263,7 +288,13 @@ def check_name(name):
     ):
         raise ValueError(
             f"name must be a C identifier (ASCII letters, digits and underscores, starting "
-            f"with a letter), got {name!r}."
+            f"with a letter), got {name!r:.100}."
+        )
+    if name.lower() in STANDARD_HEADERS:
+        raise ValueError(
+            f"name={name!r} would write {name}.h, which hides the C standard header "
+            f"<{name.lower()}.h> wherever the folder is on the include path; choose another "
+            "name."
         )
     return name
 
