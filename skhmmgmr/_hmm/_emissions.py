@@ -372,13 +372,10 @@ class GaussianEmissions(ABC):
         return self._with(self.means[:, dims], self.full_covariances[:, dims][:, :, dims])
 
     def split(self, state, offset):
-        """The same densities with ``state`` split in two, the new one last.
-
-        The two halves are centred at ``mean -/+ offset`` (``offset`` of shape (n_dims,)); a
-        full covariance loses ``offset offset^T``, so that an equal mixture of the halves has
-        the state's mean and covariance (a moment-preserving split; ``offset`` must keep it
-        positive definite). A shared (tied) covariance stays as it is.
-        """
+        """The densities with ``state`` split in two halves at ``mean -/+ offset`` (shape
+        (n_dims,)), the new one last; a full covariance loses ``offset offset^T`` (an equal
+        mixture of the halves keeps the state's moments; ``offset`` must keep it positive
+        definite), the other families keep theirs."""
         offset = np.asarray(offset, dtype=float)
         means = np.vstack([self.means, self.means[state] + offset])
         means[state] = self.means[state] - offset
@@ -387,9 +384,7 @@ class GaussianEmissions(ABC):
 
     @staticmethod
     def _split_covariances(full, state, offset):
-        """Covariances (n_states + 1, n_dims, n_dims) of :meth:`split`, ``state``'s copied
-        last; a family that keeps one covariance per state takes ``offset offset^T`` off
-        both halves."""
+        """Covariances (n_states + 1, n_dims, n_dims) of :meth:`split` (``state``'s last)."""
         return full
 
     def rescaled(self, center, scale):
