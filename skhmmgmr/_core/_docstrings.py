@@ -52,8 +52,9 @@ search : {"full", "fast"}, default="full"
     state at a time, each with a few EM iterations, and the models a decision reads (the K of
     the 1% rule) are fitted as ``"full"`` fits them. The fast search serves a plain
     :class:`~skhmmgmr.HMMGMRRegressor` with complete data, no read-out and one output; any
-    other estimator is searched in full. See the user guide, "The parameter-selection
-    framework".""",
+    other estimator is searched in full. It is opt-in: its screened models sit in other EM
+    optima than the full search's, and some selections differ as they do between two k-means
+    starts of the full search. See the user guide, "The parameter-selection framework".""",
     "k_min, k_max": """\
 k_min, k_max : int, default=1, 20
     Range of K, the number of hidden states.""",
