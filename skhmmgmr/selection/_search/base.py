@@ -53,7 +53,7 @@ def _evaluation_context(estimator, y, groups, splits, sampling_period, search="f
     """
     codes, ids = pd.factorize(groups, sort=False)
     context = (clone(estimator), y, codes, list(ids), splits, sampling_period)
-    return joblib.hash(context if search == "full" else (*context, search))
+    return joblib.hash((*context, search) if search == "fast" else context)
 
 
 #: The constraints of the parameters every search takes: the selectors' (through
@@ -154,7 +154,7 @@ class RecordingSearchMixin:
         """The block of a ``fit`` whose evaluations take the search of ``search``: the fast
         one holds its data (shared with the workers) until the block ends."""
         estimator = self._search_estimator()
-        if self.search == "full" or not serves(estimator, y):
+        if self.search != "fast" or not serves(estimator, y):
             self._fast_search = None
             try:
                 yield
