@@ -55,6 +55,13 @@ FRESH_FIT = ("mvt", 0.0)
 N_FOLDS = 8
 N_CHUNKS = 10
 SE_FACTOR = 2.0
+#: The fresh fit is considered when it is ahead of the choice among the adapted candidates by
+#: this many standard errors of their paired differences on the time folds ...
+FRESH_FIT_FACTOR = 0.5
+#: ... and chosen unless that choice is ahead of it by this many on held-out recordings ...
+RECORDINGS_FACTOR = 1.0
+#: ... or, with a single recording, if its score is at least this fraction below the choice's.
+SINGLE_RECORDING_MARGIN = 0.1
 
 RELEVANCE_CONSTRAINT = [Interval(numbers.Real, 0, None, closed="both"), StrOptions({AUTO})]
 
@@ -114,6 +121,20 @@ def time_folds(recordings, n_folds=N_FOLDS):
     return folds
 
 
+def recording_folds(recordings):
+    """The folds of ``recordings`` that hold out one whole recording each, in the form of
+    :func:`time_folds`; none with fewer than two recordings."""
+    if len(recordings) < 2:
+        return []
+    parts = [
+        np.arange(start, stop)
+        for start, stop in zip(recordings.starts, recordings.stops, strict=True)
+    ]
+    return [
+        (*_pieces(parts[:i] + parts[i + 1 :]), *_pieces([held])) for i, held in enumerate(parts)
+    ]
+
+
 def _pieces(parts):
     """The rows of ``parts`` (index arrays) and their recordings, one per part."""
     lengths = np.array([part.size for part in parts])
@@ -135,31 +156,89 @@ def chunk_ids(recordings, n_chunks=N_CHUNKS):
     return ids
 
 
-def choose(pairs, chunk_errors, counts, se_factor=SE_FACTOR):
-    """The table of the choice: one row per candidate of ``pairs`` (in the rule's order) with
-    ``parameters``, ``relevance``, ``validation_rmse`` (the mean over the held-out chunks of
-    the root mean squared error in the chunk), ``validation_se`` (its standard error over the
-    chunks) and ``chosen``: the first candidate within ``se_factor`` standard errors of the
-    best one's score. ``chunk_errors`` (n_candidates, n_chunks) holds the sums of every
-    candidate's squared errors per chunk (NaN where a candidate could not adapt), ``counts``
-    the entries of every chunk (chunks with none are left out)."""
+def chunk_rmse(chunk_errors, counts):
+    """The root mean squared error of every candidate (row of ``chunk_errors``, the sums of
+    its squared errors per chunk, NaN where it could not adapt) in every chunk with entries
+    (``counts``): shape (n_candidates, n_chunks with entries)."""
     kept = np.asarray(counts) > 0
-    errors, counts = np.asarray(chunk_errors, dtype=float)[:, kept], np.asarray(counts)[kept]
-    n_chunks = counts.size
-    rmse = np.sqrt(errors / counts)
+    return np.sqrt(np.asarray(chunk_errors, dtype=float)[:, kept] / np.asarray(counts)[kept])
+
+
+def ahead(rmse, than, factor):
+    """Whether the chunk errors ``rmse`` are ahead of ``than`` (the same chunks) by more than
+    ``factor`` standard errors of their difference: the mean of the paired differences below
+    ``-factor`` times their spread over the square root of their number. Never with NaN
+    (a candidate that could not adapt) or fewer than two chunks."""
+    difference = np.asarray(rmse) - np.asarray(than)
+    if difference.size < 2 or not np.isfinite(difference).all():
+        return False
+    se = np.std(difference, ddof=1) / np.sqrt(difference.size)
+    return bool(difference.mean() < -factor * se)
+
+
+def choose(pairs, chunk_errors, counts, se_factor=SE_FACTOR, fresh_factor=FRESH_FIT_FACTOR):
+    """The table of the choice on the time folds: one row per candidate of ``pairs`` (in the
+    rule's order) with ``parameters``, ``relevance``, ``validation_rmse`` (the mean over the
+    held-out chunks of the root mean squared error in the chunk), ``validation_se`` (its
+    standard error over the chunks), ``recordings_rmse`` (NaN: filled by
+    :func:`confirm_fresh_fit`) and ``chosen``; and whether the fresh fit is to be confirmed
+    on held-out recordings.
+
+    ``chunk_errors`` (n_candidates, n_chunks) holds the sums of every candidate's squared
+    errors per chunk (NaN where a candidate could not adapt), ``counts`` the entries of every
+    chunk (chunks with none are left out). Among the candidates that keep the fitted model as
+    a prior ("do not adapt" and the relevance grid) the first within ``se_factor`` standard
+    errors of the best one's score is chosen; a fresh fit (:data:`FRESH_FIT`, last in
+    ``pairs``) is then to be confirmed when it is :func:`ahead` of that choice by
+    ``fresh_factor`` standard errors of their difference."""
+    rmse = chunk_rmse(chunk_errors, counts)
+    n_chunks = rmse.shape[1]
     score = rmse.mean(axis=1) if n_chunks else np.full(len(pairs), np.nan)
     se = np.full(len(pairs), np.nan)
-    chosen = 0  # without two chunks there is no spread to measure: nothing moves
+    fresh = len(pairs) > 1 and pairs[-1] == FRESH_FIT
+    chosen, confirm = 0, False  # without two chunks there is no spread to measure: nothing moves
     if n_chunks > 1:
         se = np.std(rmse, axis=1, ddof=1) / np.sqrt(n_chunks)
-        best = int(np.nanargmin(score))
-        chosen = int(np.argmax(score <= score[best] + se_factor * se[best]))  # NaN: never
-    return pd.DataFrame(
+        prior = slice(0, len(pairs) - 1 if fresh else len(pairs))
+        scores = score[prior]
+        best = int(np.nanargmin(scores))
+        chosen = int(np.argmax(scores <= scores[best] + se_factor * se[best]))  # NaN: never
+        confirm = fresh and ahead(rmse[-1], rmse[chosen], fresh_factor)
+    table = pd.DataFrame(
         {
             "parameters": [p for p, _ in pairs],
             "relevance": [float(r) for _, r in pairs],
             "validation_rmse": score,
             "validation_se": se,
+            "recordings_rmse": np.full(len(pairs), np.nan),
             "chosen": np.arange(len(pairs)) == chosen,
         }
     )
+    return table, confirm
+
+
+def confirm_fresh_fit(table, chunk_errors=None, counts=None):
+    """``table`` of :func:`choose` with the fresh fit (its last row) chosen if it holds on
+    held-out recordings: unless the choice of the time folds is :func:`ahead` of it there by
+    :data:`RECORDINGS_FACTOR` standard errors of their difference (or either has no score
+    there). ``chunk_errors`` (2, n_chunks): the sums of squared errors per chunk of the choice
+    and of the fresh fit on the :func:`recording_folds`, whose mean root mean squared errors
+    go to ``recordings_rmse``. None with a single recording (none to hold out): the fresh fit
+    is chosen if its score on the time folds is at least :data:`SINGLE_RECORDING_MARGIN` (a
+    fraction) below the choice's."""
+    table = table.copy()
+    fresh = len(table) - 1
+    first = int(np.flatnonzero(table["chosen"])[0])
+    if chunk_errors is None:
+        scores = table["validation_rmse"].to_numpy()
+        if scores[fresh] > (1.0 - SINGLE_RECORDING_MARGIN) * scores[first]:
+            return table
+    else:
+        rmse = chunk_rmse(chunk_errors, counts)
+        table.loc[[first, fresh], "recordings_rmse"] = rmse.mean(axis=1)
+        if rmse.shape[1] < 2 or not np.isfinite(rmse).all():
+            return table
+        if ahead(rmse[0], rmse[1], RECORDINGS_FACTOR):
+            return table
+    table["chosen"] = np.arange(len(table)) == fresh
+    return table
