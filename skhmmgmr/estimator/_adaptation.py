@@ -143,8 +143,8 @@ class AdaptMixin:
         like the fitted model's keeps it as it is; one far from it moves it as far as the
         held-out rows support, up to a model of its own. The choice costs about 55 single
         adaptations (8 folds of 6 MAP EM runs and a fit, each followed by a prediction; two
-        per recording more when the fresh fit leads): about 1-2 s for 1-5 minutes at 20
-        Hz, K=5, 5 inputs (see :doc:`/user_guide/adaptation`).
+        per recording more when the fresh fit leads): 1-4 s for 1-5 minutes at 20 Hz, K=5, 5
+        inputs (see :doc:`/user_guide/adaptation`).
 
         This is not ``partial_fit``: in scikit-learn ``partial_fit`` learns incrementally
         towards the fit of all the data seen so far, whereas ``adapt`` treats the fitted
