@@ -138,7 +138,7 @@ def torque_ahead(
     >>> ahead.groupby("horizon").size().to_dict()
     {0.5: 18, 1.0: 18}
     """
-    spec = SectionSpec.of(locals(), "torque_ahead")
+    spec = SectionSpec.of(locals(), "torque_ahead", perturbation=None)
     parameters = check_driver(driver)
     if not hasattr(model, "filter_stream"):
         raise TypeError(
