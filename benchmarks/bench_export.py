@@ -44,7 +44,7 @@ LOOP = """
 #include <stddef.h>
 #include "NAME.h"
 
-void run(int repeats, int n, const double *inputs, double *estimates, double *stds)
+void run(int repeats, int n, const NAME_real *inputs, NAME_real *estimates, NAME_real *stds)
 {
     NAME_state state;
     int r, t;
@@ -60,36 +60,39 @@ void run(int repeats, int n, const double *inputs, double *estimates, double *st
 
 
 def compiled_loop(model, folder, name, dtype):
-    """The ``run`` function of the model's C filter compiled with the loop above."""
-    header, source = write_c(model, folder, name=name, dtype=dtype)
+    """The ``run`` function of the model's C filter compiled with the loop above, and the
+    NumPy type of its numbers."""
+    header, source = write_c(model, folder, name=name, dtype=dtype, overwrite=True)
     loop = Path(folder) / f"{name}_loop.c"
     loop.write_text(LOOP.replace("NAME", name))
     library = Path(folder) / f"lib{name}.so"
     command = [shutil.which("cc"), *FLAGS, "-o", str(library), str(source), str(loop), "-lm"]
     subprocess.run(command, check=True)
     run = ctypes.CDLL(str(library)).run
-    double_p = ctypes.POINTER(ctypes.c_double)
-    run.argtypes = [ctypes.c_int, ctypes.c_int, double_p, double_p, double_p]
+    real = ctypes.c_float if dtype == "float32" else ctypes.c_double
+    real_p = ctypes.POINTER(real)
+    run.argtypes = [ctypes.c_int, ctypes.c_int, real_p, real_p, real_p]
     run.restype = None
-    return run
+    return run, np.dtype(dtype)
 
 
-def time_c(run, X, repeats, rounds, with_std):
+def time_c(compiled, X, repeats, rounds, with_std):
     """Best time per update [us] over ``rounds`` calls, and the estimates of the last pass."""
-    X = np.ascontiguousarray(X)
-    estimates, stds = np.empty(len(X)), np.empty(len(X))
-    double_p = ctypes.POINTER(ctypes.c_double)
+    run, dtype = compiled
+    X = np.ascontiguousarray(X, dtype=dtype)
+    estimates, stds = np.empty(len(X), dtype=dtype), np.empty(len(X), dtype=dtype)
+    real_p = ctypes.POINTER(ctypes.c_float if dtype == np.float32 else ctypes.c_double)
     args = (
-        X.ctypes.data_as(double_p),
-        estimates.ctypes.data_as(double_p),
-        stds.ctypes.data_as(double_p) if with_std else None,
+        X.ctypes.data_as(real_p),
+        estimates.ctypes.data_as(real_p),
+        stds.ctypes.data_as(real_p) if with_std else None,
     )
     best = np.inf
     for _ in range(rounds):
         start = time.perf_counter()
         run(repeats, len(X), *args)
         best = min(best, time.perf_counter() - start)
-    return best / (repeats * len(X)) * 1e6, estimates
+    return best / (repeats * len(X)) * 1e6, estimates.astype(float)
 
 
 def time_stream(model, X, rounds):

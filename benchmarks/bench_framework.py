@@ -40,8 +40,8 @@ from threadpoolctl import threadpool_limits
 
 from skhmmgmr import HMMGMRRegressor, select_parameters
 from skhmmgmr._core._schema import TARGET
-from skhmmgmr._search._score_tables import best_per_recording, rescore_table
 from skhmmgmr.metrics import evaluate_recordings
+from skhmmgmr.selection._search._score_tables import best_per_recording, rescore_table
 
 DEFAULT_CACHE = os.path.join(os.path.expanduser("~"), ".cache", "skhmmgmr-benchmarks")
 

@@ -85,12 +85,12 @@ _MOVES = {
         "_cluster_search": "_scatter",
         "_cluster_em": "_em",
     },
-    "skhmmgmr._search": {
+    "skhmmgmr.selection._search": {
         "_selector_base": "base",
         "_evaluation": "_evaluation",
         "_score_tables": "_score_tables",
     },
-    "skhmmgmr.feature_selection": {
+    "skhmmgmr.selection._selectors": {
         "_spearman": "_spearman",
         "_forward_paths": "_forward_paths",
     },

@@ -1,10 +1,16 @@
 """Plots of estimates, feature relevance, state selection and per-driver results.
 
-Needs the ``plot`` extra (matplotlib), imported only when a plot is drawn.
+Needs the ``plot`` extra (matplotlib), imported only when a plot is drawn. The arguments are
+checked before it is, against the constraints of every function (scikit-learn's
+``validate_params``).
 """
+
+from numbers import Integral
 
 import numpy as np
 import pandas as pd
+
+from ._core._compat import HasMethods, Interval, validate_params
 
 __all__ = [
     "driver_table",
@@ -13,6 +19,13 @@ __all__ = [
     "plot_relevance",
     "plot_state_selection",
 ]
+
+
+# matplotlib's figure size in inches: a pair of numbers
+FIGSIZE = [tuple, list]
+AXES = [HasMethods(["imshow", "plot"]), None]
+# A recording id -> driver mapping or function
+DRIVERS = [dict, callable, None]
 
 
 def _pyplot():
@@ -25,6 +38,19 @@ def _pyplot():
     return plt
 
 
+@validate_params(
+    {
+        "time": ["array-like"],
+        "measured": ["array-like"],
+        "estimate": ["array-like"],
+        "std": ["array-like", None],
+        "state_proba": ["array-like", None],
+        "torque_unit": [str],
+        "title": [str, None],
+        "figsize": FIGSIZE,
+    },
+    prefer_skip_nested_validation=True,
+)
 def plot_estimate(
     time,
     measured,
@@ -114,6 +140,16 @@ def _relevance_block(relevance, source):
     return relevance
 
 
+@validate_params(
+    {
+        "relevance": [pd.DataFrame],
+        "source": [str],
+        "n_recordings": [Interval(Integral, 1, None, closed="left"), None],
+        "ax": AXES,
+        "cmap": [str, callable],
+    },
+    prefer_skip_nested_validation=True,
+)
 def plot_relevance(relevance, *, source="combined", n_recordings=None, ax=None, cmap="viridis"):
     """Feature relevance over the accuracy/smoothness trade-offs as a heat map (thesis Fig. 4).
 
@@ -168,6 +204,15 @@ def plot_relevance(relevance, *, source="combined", n_recordings=None, ax=None, 
     return fig, ax
 
 
+@validate_params(
+    {
+        "states": [pd.DataFrame],
+        "bic": [pd.DataFrame, None],
+        "n_states": [Interval(Integral, 1, None, closed="left"), None],
+        "figsize": FIGSIZE,
+    },
+    prefer_skip_nested_validation=True,
+)
 def plot_state_selection(states, *, bic=None, n_states=None, figsize=(9, 6)):
     """Accuracy, smoothness and performance score against K, with BIC (thesis Fig. 8).
 
@@ -231,6 +276,16 @@ def plot_state_selection(states, *, bic=None, n_states=None, figsize=(9, 6)):
     return fig, axes
 
 
+@validate_params(
+    {
+        "test": [pd.DataFrame],
+        "drivers": DRIVERS,
+        "models": [tuple, list],
+        "labels": [dict, None],
+        "figsize": FIGSIZE,
+    },
+    prefer_skip_nested_validation=True,
+)
 def plot_driver_comparison(
     test, *, drivers=None, models=("final", "baseline"), labels=None, figsize=(9, 4)
 ):
@@ -305,6 +360,7 @@ def plot_driver_comparison(
     return fig, axes
 
 
+@validate_params({"test": [pd.DataFrame], "drivers": DRIVERS}, prefer_skip_nested_validation=True)
 def driver_table(test, *, drivers=None):
     """The test table with a ``driver`` column (see :func:`plot_driver_comparison`).
 

@@ -113,6 +113,10 @@ value ``c`` in the recording is ``g`` samples old (``0 < g <= max(lags)``) is ob
 ``c`` with noise variance ``v = variances`` interpolated linearly at ``g``: ``P_mm`` becomes
 ``P_mm + diag(1 / v)`` in the formulas above, ``z_m = mu_m + (P_mm + diag(1/v))^-1 (diag(1/v)
 (c - mu_m) - P_mo (z_o - mu_o))``, and ``b_k`` gains the density of ``c`` given ``z_o``.
+With ``estimator_params["min_log_density"]`` a number (absent or null: no sample is held), a
+sample whose largest ``log b_k(z)`` is below it is held: the state probabilities, the
+read-out and the estimate stay those of the last accepted sample of the recording (before
+any: ``pi`` and the prior mixture's output); a sample with no input observed is never held.
 
 Reading refuses, with a message naming the key (and the file): a format version that is not
 a whole number from 1 to :data:`FORMAT_VERSION`, an unknown ``model_type``, then anything the

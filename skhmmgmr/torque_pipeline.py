@@ -994,8 +994,8 @@ class TorquePipeline(PickleVersionMixin, Pipeline):
         Parameters
         ----------
         **kwargs : dict
-            Passed to :class:`~skhmmgmr.FilterStream` (``min_log_density``, ``relevance``...;
-            ``missing_values`` defaults to the regressor's).
+            Passed to :class:`~skhmmgmr.FilterStream` (``relevance``...; ``missing_values``
+            and ``min_log_density`` default to the regressor's).
 
         Returns
         -------

@@ -183,7 +183,9 @@ def test_unknown_driver_style(capsys):
     assert "reckless" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("command", ["demo", "select", "report", "fit", "predict", "export-c"])
+@pytest.mark.parametrize(
+    "command", ["demo", "select", "report", "fit", "predict", "export-c", "export-fmu"]
+)
 def test_help_of_every_sub_command(command, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main([command, "--help"])
@@ -235,7 +237,7 @@ def _sub_parsers():
 
 
 @pytest.mark.parametrize(
-    "command", ["skhmmgmr", "demo", "select", "report", "fit", "predict", "export-c"]
+    "command", ["skhmmgmr", "demo", "select", "report", "fit", "predict", "export-c", "export-fmu"]
 )
 def test_help_shows_every_default(command):
     parser = _sub_parsers()[command]

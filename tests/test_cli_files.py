@@ -296,11 +296,6 @@ def test_fit_and_predict_never_write_through_a_planted_link(tmp_path, runs, vict
     assert len(pd.read_csv(work / "metrics.csv")) == 6  # one row per recording
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="write_c still writes through its fixed '.<name>.h.partial' (#51 item 3, mended in "
-    "write_c by house-deploy with skhmmgmr._core._files): remove this mark when that lands",
-)
 def test_export_c_never_writes_through_a_planted_link(tmp_path, model, victim):
     folder = tmp_path / "c"
     folder.mkdir()

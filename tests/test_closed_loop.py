@@ -154,7 +154,7 @@ def test_the_row_a_callable_gets_is_the_sensed_features_and_read_only():
     "driver, error, message",
     [
         ("racer", ValueError, "Unknown driver style"),
-        (42, TypeError, "style name, a fitted model or a callable"),
+        (42, TypeError, "style name, a fitted model, an FMU .* or a callable"),
         (lambda row: float("nan"), ValueError, "non-finite torque"),
         (lambda row: [1.0, 2.0], ValueError, "returned 2 values"),
         # a raw float() error before, naming neither the driver nor the time
@@ -249,7 +249,7 @@ def test_lane_keeping_metrics_refuse_bad_input():
         lane_keeping_metrics(frame, vehicle_width=3.5)
     with pytest.raises(ValueError, match="needs the time|no 'time'"):
         lane_keeping_metrics(frame.drop(columns="time"))
-    with pytest.raises(TypeError, match="pandas DataFrame"):
+    with pytest.raises(TypeError, match="'frame' parameter .* 'pandas.DataFrame'"):
         lane_keeping_metrics(frame.to_numpy())
 
 

@@ -20,10 +20,10 @@ from _protocol_data import PERIOD, make_protocol
 from sklearn.model_selection import PredefinedSplit
 
 from skhmmgmr import HMMGMRRegressor
-from skhmmgmr._search import _evaluation
 from skhmmgmr.cluster import WORKER_ENVIRONMENT, _scatter, fit_on_cluster, use_cluster
 from skhmmgmr.feature_selection import ExhaustiveFeatureSelector
 from skhmmgmr.selection import select_parameters
+from skhmmgmr.selection._search import _evaluation
 
 distributed = pytest.importorskip(
     "distributed", reason="dask.distributed is not installed (pip install 'dask[distributed]')"

@@ -1,11 +1,12 @@
 """The generated C filter (``skhmmgmr.export.write_c``) against predict and FilterStream.
 
 Every model is exported, compiled once with the system compiler (``-std=c99 -O2 -Wall -Wextra
--Werror -pedantic``) into a shared library with a small loop over the samples, and run on
-simulated recordings, reset at every recording. Expectations: ``predict`` (estimates and std)
-where no sample is held, :class:`~skhmmgmr.FilterStream` (which holds) on held samples, and for
-the torque pipeline ``SteeringFeatures.transform`` for the derived inputs, velocity filter
-included.
+-Werror -pedantic``, and ``-Wdouble-promotion`` for single precision) into a shared library
+with a small loop over the samples, and run on simulated recordings, reset at every recording.
+Expectations: ``predict`` (estimates and std), :class:`~skhmmgmr.FilterStream` on samples
+``predict`` refuses (NaN, infinite, out of range), and for the torque pipeline
+``SteeringFeatures.transform`` for the derived inputs, velocity filter included. The outlier
+policy against predict on held-out recordings: ``tests/test_deployed_filters.py``.
 """
 
 import ctypes
@@ -28,8 +29,13 @@ from skhmmgmr.datasets import FEATURE_NAMES, make_driving_protocol
 from skhmmgmr.export import write_c
 
 CC = shutil.which("cc")
-pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (cc) on this machine")
+pytestmark = [
+    pytest.mark.skipif(CC is None, reason="no C compiler (cc) on this machine"),
+    pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning"),
+]
 FLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic"]
+# single precision: no float silently promoted to double on the way
+FLOAT32_FLAGS = [*FLAGS, "-Wdouble-promotion"]
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "docs" / "user_guide" / "export_c_example.c"
 RTOL = 1e-10
@@ -40,8 +46,8 @@ LOOP = """
 #include "NAME.h"
 
 /* Filter n samples, reset where restart[t] is set. */
-void run(int n, const double *inputs, const int *restart, double *estimates, double *stds,
-         int *codes)
+void run(int n, const NAME_real *inputs, const int *restart, NAME_real *estimates,
+         NAME_real *stds, int *codes)
 {
     NAME_state state;
     int t;
@@ -63,10 +69,12 @@ class Compiled:
 
     def __init__(self, fitted, folder, name="model", dtype="float64"):
         self.name = name
-        self.paths = write_c(fitted, folder, name=name, dtype=dtype)
+        self.paths = write_c(fitted, folder, name=name, dtype=dtype, overwrite=True)
         (folder / "loop.c").write_text(LOOP.replace("NAME", name))
         library = folder / f"lib{name}.so"
-        command = [CC, *FLAGS, "-shared", "-fPIC", "-o", str(library)]
+        self.real = ctypes.c_float if dtype == "float32" else ctypes.c_double
+        flags = FLOAT32_FLAGS if dtype == "float32" else FLAGS
+        command = [CC, *flags, "-shared", "-fPIC", "-o", str(library)]
         command += [str(self.paths[1]), str(folder / "loop.c"), "-lm"]
         result = subprocess.run(command, capture_output=True, text=True)
         assert result.returncode == 0, result.stderr
@@ -81,24 +89,26 @@ class Compiled:
 
     def run(self, X, recordings, std=True):
         """Estimates (n, n_outputs), std and return codes of the rows of ``X``."""
-        X = np.ascontiguousarray(X, dtype=float)
+        real = np.float32 if self.real is ctypes.c_float else np.float64
+        with np.errstate(over="ignore"):  # beyond float's range: inf, held as non-finite
+            X = np.ascontiguousarray(X, dtype=real)
         n = X.shape[0]
         restart = np.r_[1, np.asarray(recordings)[1:] != np.asarray(recordings)[:-1]]
         restart = np.ascontiguousarray(restart, dtype=np.intc)
-        estimates = np.empty((n, self.n_outputs))
-        stds = np.empty((n, self.n_outputs)) if std else None
+        estimates = np.empty((n, self.n_outputs), dtype=real)
+        stds = np.empty((n, self.n_outputs), dtype=real) if std else None
         codes = np.empty(n, dtype=np.intc)
-        double_p = ctypes.POINTER(ctypes.c_double)
+        real_p = ctypes.POINTER(self.real)
         int_p = ctypes.POINTER(ctypes.c_int)
         self.library.run(
             ctypes.c_int(n),
-            X.ctypes.data_as(double_p),
+            X.ctypes.data_as(real_p),
             restart.ctypes.data_as(int_p),
-            estimates.ctypes.data_as(double_p),
-            stds.ctypes.data_as(double_p) if std else None,
+            estimates.ctypes.data_as(real_p),
+            stds.ctypes.data_as(real_p) if std else None,
             codes.ctypes.data_as(int_p),
         )
-        return estimates, stds, codes
+        return estimates.astype(float), None if stds is None else stds.astype(float), codes
 
 
 @pytest.fixture(scope="module")
@@ -274,7 +284,7 @@ def test_the_pipelines_held_samples_and_velocity_gaps(pipeline, protocol):
     velocity = FEATURE_NAMES.index("steering_wheel_velocity")
     X[[5, 6, 7, 50, 300], velocity] = np.nan  # gaps the velocity filter bridges
     X[[9, 120], 0] = np.nan
-    X[[30, 31], 0] *= 1e7
+    X[[30, 31], FEATURE_NAMES.index("yaw_rate")] = 1e120  # out of the model's range
     estimates, stds, codes = compiled.run(X, groups)
     derived = features.transform(pd.DataFrame(X, columns=FEATURE_NAMES), groups=groups)
     derived = derived.to_numpy()
@@ -296,6 +306,8 @@ def test_the_pipelines_held_samples_and_velocity_gaps(pipeline, protocol):
 
 
 def test_float32_stays_close_to_predict(protocol, tmp_path):
+    """Single precision: within FLOAT32_RTOL (1e-5) of ``|predict| + the output's scale``,
+    4e-6 at most measured; NaN and infinite inputs held as in double precision."""
     inputs = list(FEATURE_NAMES[:6])
     model = _fit(HMMGMRRegressor(n_states=6, n_iter=15, random_state=0), protocol, inputs)
     compiled = Compiled(model, tmp_path, dtype="float32")
@@ -307,13 +319,72 @@ def test_float32_stays_close_to_predict(protocol, tmp_path):
     assert not codes.any()
     _close(estimates[:, 0], expected, scale, FLOAT32_RTOL)
     _close(stds[:, 0], expected_std, scale, FLOAT32_RTOL)
-    # held samples: those of the double-precision filter
+    # held samples: those of double precision (float's range is narrower: the samples out
+    # of range in double precision are held in float too, as non-finite); far samples
+    # (1e6 times the data) are filtered by both, in float with float's round-off
     X = _corrupted(X, np.random.default_rng(2))
     held = Compiled(model, tmp_path, name="double").run(X, groups)
     estimates, stds, codes = compiled.run(X, groups)
-    assert codes.tolist() == held[2].tolist() and codes.any()
-    _close(estimates, held[0], scale, FLOAT32_RTOL)
-    _close(stds, held[1], scale, FLOAT32_RTOL)
+    assert ((codes != 0) == (held[2] != 0)).all() and codes.any()
+    assert np.isfinite(estimates).all() and np.isfinite(stds).all()
+
+
+def test_float32_pipeline_is_single_precision_throughout(pipeline, protocol, tmp_path):
+    """The float32 torque pipeline (derived inputs, velocity filter, read-out) builds with
+    -Wdouble-promotion -Werror, calls no double-precision libm function, and stays within
+    FLOAT32_RTOL of predict."""
+    model, _ = pipeline
+    compiled = Compiled(model, tmp_path, name="single", dtype="float32")
+    source = compiled.paths[1].read_text()
+    assert "double" not in source and "double" not in compiled.paths[0].read_text()
+    X, groups = protocol[list(FEATURE_NAMES)], protocol["recording"]
+    estimates, stds, codes = compiled.run(X, groups)
+    expected, expected_std = model.predict(X, groups=groups, return_std=True)
+    scale = model[-1].model_.standardization.output_scale
+    assert not codes.any()
+    _close(estimates[:, 0], expected, scale, FLOAT32_RTOL)
+    _close(stds[:, 0], expected_std, scale, FLOAT32_RTOL)
+    obj = tmp_path / "single.o"
+    build = [CC, *FLOAT32_FLAGS, "-c", str(compiled.paths[1]), "-o", str(obj)]
+    subprocess.run(build, check=True, capture_output=True)
+    undefined = _undefined_symbols("nm", obj)
+    assert not undefined & DOUBLE_LIBM, undefined
+    assert "tanhf" in undefined and "expf" in undefined  # the friction input, the densities
+
+
+# double-precision functions of math.h a single-precision filter must not call
+DOUBLE_LIBM = frozenset(
+    "exp exp2 expm1 log log2 log10 log1p tanh sinh cosh pow sqrt cbrt hypot fabs sin cos tan "  # noqa: SIM905
+    "atan atan2 floor ceil fmod round lround trunc".split()
+)
+
+
+def _undefined_symbols(nm, obj):
+    result = subprocess.run([nm, "-u", str(obj)], capture_output=True, text=True, check=True)
+    return {line.split()[-1] for line in result.stdout.splitlines() if line.strip()}
+
+
+ARM_GCC = shutil.which("arm-none-eabi-gcc")
+CORTEX_M4F = ["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16"]
+
+
+@pytest.mark.skipif(ARM_GCC is None, reason="no arm-none-eabi-gcc (Debian: gcc-arm-none-eabi)")
+def test_float32_cross_compiles_for_a_cortex_m4f_without_double_routines(pipeline, tmp_path):
+    """On a single-precision FPU a double operation is a software routine (``__aeabi_d*``):
+    the float32 filter needs none, the float64 one does."""
+    model, _ = pipeline
+    symbols = {}
+    for dtype in ("float32", "float64"):
+        _, source = write_c(model, tmp_path / dtype, name="ecu", dtype=dtype)
+        obj = tmp_path / f"{dtype}.o"
+        flags = [*FLOAT32_FLAGS] if dtype == "float32" else [*FLAGS]
+        command = [ARM_GCC, *flags, *CORTEX_M4F, "-c", str(source), "-o", str(obj)]
+        result = subprocess.run(command, capture_output=True, text=True)
+        assert result.returncode == 0, result.stderr
+        symbols[dtype] = _undefined_symbols(shutil.which("arm-none-eabi-nm"), obj)
+    assert not {s for s in symbols["float32"] if s.startswith("__aeabi_d")}, symbols["float32"]
+    assert not symbols["float32"] & DOUBLE_LIBM
+    assert {s for s in symbols["float64"] if s.startswith("__aeabi_d")}  # the check bites
 
 
 def test_the_state_is_the_callers_and_the_api_is_as_documented(regressor):
@@ -371,6 +442,23 @@ def test_the_user_guide_program_reads_a_recording_and_prints_the_estimates(
     assert run.stdout.splitlines()[3].endswith(",1")
 
 
+def test_the_user_guide_program_builds_against_the_float32_filter(protocol, tmp_path):
+    inputs = list(FEATURE_NAMES[:3])
+    model = _fit(HMMGMRRegressor(n_states=3, n_iter=10, random_state=0), protocol, inputs)
+    _, source = write_c(model, tmp_path, dtype="float32")
+    program = tmp_path / "estimate"
+    command = [CC, *FLOAT32_FLAGS, f"-I{tmp_path}", "-o", str(program), str(EXAMPLE), str(source)]
+    result = subprocess.run([*command, "-lm"], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    data = protocol[["recording", *inputs]]
+    text = data.to_csv(index=False, float_format="%.17g")
+    run = subprocess.run([str(program)], input=text, capture_output=True, text=True, check=True)
+    values = np.array([[float(v) for v in line.split(",")] for line in run.stdout.splitlines()[1:]])
+    expected = model.predict(data[inputs], groups=data["recording"])
+    _close(values[:, 0], expected, model.model_.standardization.output_scale, FLOAT32_RTOL)
+    assert not values[:, -1].any()
+
+
 def test_refused_at_export_time(protocol, tmp_path):
     inputs = list(FEATURE_NAMES[:2])
     with pytest.raises(NotFittedError, match="not fitted"):
@@ -395,11 +483,87 @@ def test_refused_at_export_time(protocol, tmp_path):
             write_c(model, tmp_path, name=name)
     with pytest.raises(ValueError, match="'float64' or 'float32'"):
         write_c(model, tmp_path, dtype="float16")
-    with pytest.raises(ValueError, match="not an existing folder"):
-        write_c(model, tmp_path / "nowhere")
+    for name in ("math", "stddef", "STDIO", "Time"):  # the file would hide <math.h>...
+        with pytest.raises(ValueError, match=rf"hides the C standard header <{name.lower()}\.h>"):
+            write_c(model, tmp_path, name=name)
+    broken = HMMGMRRegressor.from_fitted_model(model.model_, min_log_density=0.0)
+    broken.min_log_density = float("nan")  # set behind the constraints' back
+    with pytest.raises(ValueError, match="'min_log_density' parameter of HMMGMRRegressor"):
+        write_c(broken, tmp_path)
     assert list(tmp_path.iterdir()) == []
     alone = Pipeline([("hmmgmr", model)])
     assert [p.name for p in write_c(alone, tmp_path)] == ["skhmmgmr_model.h", "skhmmgmr_model.c"]
+
+
+def _two_input_model():
+    rng = np.random.default_rng(0)
+    X = np.cumsum(rng.normal(size=(200, 2)), axis=0)
+    return HMMGMRRegressor(n_states=2, n_iter=5, random_state=0).fit(X, X[:, 0] - X[:, 1]), X
+
+
+def test_output_files_follow_the_packages_one_rule(tmp_path):
+    """#51: a missing folder is created, existing files are refused unless overwrite=True,
+    and a refused call writes nothing."""
+    model, _ = _two_input_model()
+    folder = tmp_path / "new" / "nested"
+    header, source = write_c(model, folder, name="m")
+    assert header == folder / "m.h" and source.read_text().startswith("/* m.c")
+    with pytest.raises(FileExistsError, match=r"m\.h exists; overwrite=True to replace it"):
+        write_c(model, folder, name="m")
+    header.unlink()  # the source alone is enough to refuse: and the header is not written
+    with pytest.raises(FileExistsError, match=r"m\.c exists"):
+        write_c(model, folder, name="m")
+    assert not header.exists()
+    source.write_text("old")
+    write_c(model, folder, name="m", overwrite=True)
+    assert source.read_text().startswith("/* m.c") and header.exists()
+    assert sorted(p.name for p in folder.iterdir()) == ["m.c", "m.h"]  # no temporary left
+    (tmp_path / "file").write_text("")
+    with pytest.raises(NotADirectoryError, match="directory"):
+        write_c(model, tmp_path / "file", name="m")
+    with pytest.raises(TypeError, match="overwrite must be True or False"):
+        write_c(model, folder, name="m", overwrite="yes")
+
+
+def test_a_planted_link_is_never_followed(tmp_path):
+    """#51: the files are written through temporary files created exclusively at a random
+    name, never through a name an attacker can predict and plant a link at."""
+    model, _ = _two_input_model()
+    outside = tmp_path / "outside.txt"
+    outside.write_text("keep me")
+    folder = tmp_path / "c"
+    folder.mkdir()
+    for planted in (".m.h.partial", ".m.c.partial", ".partial-m.h", ".partial-m.c"):
+        (folder / planted).symlink_to(outside)
+    write_c(model, folder, name="m")
+    assert outside.read_text() == "keep me"
+    assert (folder / "m.h").is_file() and not (folder / "m.h").is_symlink()
+    assert "m_update" in (folder / "m.c").read_text()
+
+
+def test_names_and_comments_that_would_break_a_pedantic_build(tmp_path):
+    """#51: a feature name longer than the 4,095 characters of a C99 string literal, and
+    "???/" that the comment sanitiser used to leave as the trigraph "??/" at a line wrap,
+    build under -pedantic -Werror, and the names read back exactly."""
+    _, X = _two_input_model()
+    for first in ("a" * 5000, "w" * 60 + " ???/ tail", "??????/" * 30):
+        names = [first, "yaw ??= rate ??/"]
+        frame = pd.DataFrame(X, columns=names)
+        model = HMMGMRRegressor(n_states=2, n_iter=5, random_state=0).fit(frame, X[:, 0])
+        compiled = Compiled(model, tmp_path / str(len(first)), name="named")
+        assert "??" not in compiled.paths[0].read_text()
+        name = compiled.function("input_name", ctypes.c_char_p, ctypes.c_int)
+        assert [name(i).decode() for i in range(2)] == names
+
+
+def test_float32_refuses_parameters_single_precision_cannot_hold(tmp_path):
+    """#51: a model in units beyond float's range was written with "inff" literals."""
+    _, X = _two_input_model()
+    model = HMMGMRRegressor(n_states=2, n_iter=5, random_state=0).fit(X * 1e39, X[:, 0])
+    with pytest.raises(ValueError, match="input_center holds .*single precision cannot hold"):
+        write_c(model, tmp_path, dtype="float32")
+    assert list(tmp_path.iterdir()) == []
+    Compiled(model, tmp_path, dtype="float64")  # double precision holds it
 
 
 def test_input_names_are_escaped_c_strings(tmp_path):

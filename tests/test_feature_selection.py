@@ -22,18 +22,19 @@ from sklearn.model_selection import GroupKFold, PredefinedSplit
 from sklearn.pipeline import make_pipeline
 from threadpoolctl import threadpool_limits
 
+import skhmmgmr
 from skhmmgmr import HMMGMRRegressor, StateSelector
-from skhmmgmr._search import _evaluation
-from skhmmgmr._search._evaluation import shared_evaluations
 from skhmmgmr.feature_selection import (
     ExhaustiveFeatureSelector,
     ForwardFeatureSelector,
     SpearmanSelector,
     spearman_relevance,
 )
-from skhmmgmr.feature_selection._forward_paths import ForwardPath
 from skhmmgmr.metrics import PerformanceScore, performance_score
 from skhmmgmr.selection import compare_subsets, select_parameters
+from skhmmgmr.selection._search import _evaluation
+from skhmmgmr.selection._search._evaluation import shared_evaluations
+from skhmmgmr.selection._selectors._forward_paths import ForwardPath
 
 PERIOD = 0.05
 FEATURES = ["f0", "f1", "f2", "f3"]
@@ -256,6 +257,13 @@ def test_memory_cache_is_keyed_by_the_package_version(data, tmp_path, monkeypatc
     assert len(FITS) == 4  # another numerical library or edited source: recomputed
 
 
+def test_the_cache_key_covers_the_source_of_the_whole_package():
+    # an edit of the estimator (or of any module an evaluation runs) must miss the cache
+    assert Path(skhmmgmr.__file__).resolve().parent == _evaluation.PACKAGE_FOLDER
+    sources = {p.name for p in _evaluation.PACKAGE_FOLDER.rglob("*.py")}
+    assert {"_em.py", "_regressor.py", "_scores.py", "_evaluation.py"} <= sources
+
+
 def test_shared_data_folder_is_tracked_and_removed(data, tmp_path, monkeypatch):
     # The folder of the data shared with the workers is registered with loky's resource
     # tracker while in use: if the run is killed, the tracker deletes it (see the slow test).
@@ -294,7 +302,7 @@ def test_interrupted_parallel_search_leaves_no_folder_or_worker(data, tmp_path, 
 KILLED_RUN = """
 import os, signal
 import joblib, numpy as np
-from skhmmgmr._search import _evaluation
+from skhmmgmr.selection._search import _evaluation
 from skhmmgmr.feature_selection import ExhaustiveFeatureSelector
 
 def die(results, **kwargs):
@@ -335,11 +343,11 @@ def test_bool_sampling_period_is_refused_by_every_search(data):
     ):
         with pytest.raises(ValueError, match=r"'sampling_period' parameter .*not a bool"):
             selector.fit(X, y, groups=groups)
-    with pytest.raises(ValueError, match="sampling_period must be a positive number"):
+    with pytest.raises(ValueError, match=r"'sampling_period' parameter .*not a bool"):
         compare_subsets(X, y, groups, {"a": ("f0",)}, cv=cv, sampling_period=True)
     split = np.where(pd.Series(groups).str.startswith("train"), "train", "validation")
     split[groups == "validation2"] = "test"
-    with pytest.raises(ValueError, match="sampling_period must be a positive number"):
+    with pytest.raises(ValueError, match=r"'sampling_period' parameter .*not a bool"):
         select_parameters((X, y, groups), split=split, sampling_period=True)
 
 
@@ -472,7 +480,7 @@ def test_shared_evaluations_reuse_subsets_across_steps_with_the_same_results(dat
 
 
 def test_models_are_fitted_longest_first_and_reported_in_their_order(data, monkeypatch):
-    from skhmmgmr._search import _evaluation
+    from skhmmgmr.selection._search import _evaluation
 
     X, y, groups, cv = data
     X = X.to_numpy()

@@ -284,7 +284,7 @@ def _score_with(scorer):
 @pytest.mark.parametrize("period", [True, np.True_, False])
 def test_bool_sampling_period_is_refused(call, period):
     # True is 1 in Python arithmetic, but not a time step
-    with pytest.raises(ValueError, match="sampling_period must be a positive number of seconds"):
+    with pytest.raises(ValueError, match=r"'sampling_period' parameter of \w+ .*not a bool"):
         call(period)
 
 
@@ -295,7 +295,7 @@ def test_missing_or_bad_sampling_information():
         performance_score(Y_TRUE, Y_PRED)
     with pytest.raises(ValueError, match="not both"):
         smoothness_score(Y_PRED, sampling_period=0.1, time=np.arange(4.0))
-    with pytest.raises(ValueError, match="positive"):
+    with pytest.raises(ValueError, match=r"'sampling_period' parameter .* range \(0.0, inf\)"):
         smoothness_score(Y_PRED, sampling_period=0)
     with pytest.raises(ValueError, match="does not increase within recording 1"):
         smoothness_score(Y_PRED, time=[0, 1, 2, 2], groups=[0, 0, 1, 1])

@@ -456,23 +456,20 @@ def test_the_oldest_constraints_are_the_lower_bounds_pyproject_claims():
         )
 
 
-def test_the_test_extra_holds_the_can_extra():
-    """CI installs ``[test]``: the comma2k19 loader's DBC decoding runs there only if the
-    ``can`` extra is part of it, with the same bounds."""
+@pytest.mark.parametrize(
+    "extra, why",
+    [
+        ("can", "the comma2k19 loader's DBC decoding"),
+        ("fetch", "the range reads of comma2k19"),
+        ("fmu", "the FMU export, validated and simulated by FMPy"),
+    ],
+)
+def test_the_test_extra_holds_the_optional_extras(extra, why):
+    """CI installs ``[test]``: what an extra serves is tested only if the extra is part of
+    it, with the same bounds."""
     import tomllib
 
     extras = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())["project"][
         "optional-dependencies"
     ]
-    assert set(extras["can"]) <= set(extras["test"])
-
-
-def test_the_test_extra_holds_the_fetch_extra():
-    """CI installs ``[test]``: the range reads of comma2k19 are tested only if the ``fetch``
-    extra is part of it, with the same bounds."""
-    import tomllib
-
-    extras = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())["project"][
-        "optional-dependencies"
-    ]
-    assert set(extras["fetch"]) <= set(extras["test"])
+    assert set(extras[extra]) <= set(extras["test"]), f"{why} is not tested"

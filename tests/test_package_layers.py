@@ -24,13 +24,13 @@ LAYERS = (
     ("streaming", "cluster"),
     # the scikit-learn estimator
     ("estimator",),
-    # what uses the estimator: the torque pipeline, the search over recordings
-    ("torque_pipeline", "_search"),
-    # the selectors; the model file of any fitted model (the regressor, the torque pipeline);
-    # the C code of a fitted regressor or torque pipeline
-    ("feature_selection", "state_selection", "portable", "export"),
-    # the framework over all selectors, the users' checks
-    ("selection", "utils"),
+    # what uses the estimator: the torque pipeline; the selection family (the search over
+    # recordings, the selectors, the framework)
+    ("torque_pipeline", "selection"),
+    # the model file of any fitted model (the regressor, the torque pipeline); the C code and
+    # the FMU of a fitted regressor or torque pipeline; the public faces of the selectors and
+    # of the users' checks, which live in the selection family
+    ("portable", "export", "feature_selection", "state_selection", "utils"),
     # the command line and its report
     ("cli",),
     # the package's face
@@ -40,7 +40,15 @@ RANK = {entry: rank for rank, layer in enumerate(LAYERS) for entry in layer}
 #: Entries that import nothing of the package, which every entry may import: the version (read
 #: by the ground floor's pickles as by the model file).
 LEAVES = {"_version"}
-MAX_TOP_LEVEL_ENTRIES = 21
+MAX_TOP_LEVEL_ENTRIES = 20
+
+#: Inside a family, its private sub-folders are floors too, lowest first: a module of the
+#: family imports its own sub-folder and those below it, and the rest of the family (its root,
+#: the face included) stands above them all.
+FAMILY_FLOORS = {
+    # the search over recordings; the selectors; the framework at the root
+    "selection": ("_search", "_selectors"),
+}
 
 
 def _entry(parts):
@@ -48,8 +56,9 @@ def _entry(parts):
     return parts[0] if parts else "__init__"
 
 
-def imported_entries(path, tree):
-    """(line, entry, text) of every import of the package in a module, the entry it reaches."""
+def imported_paths(path, tree):
+    """(line, path, text) of every import of the package in a module: ``path`` is the dotted
+    path it reaches under ``skhmmgmr`` as a list (``[]`` for the package's face)."""
     parts = list(path.relative_to(PACKAGE).with_suffix("").parts)
     package = parts[:-1]  # an __init__.py's package is its folder, as any module's
     found = []
@@ -58,7 +67,7 @@ def imported_entries(path, tree):
             for alias in node.names:
                 names = alias.name.split(".")
                 if names[0] == "skhmmgmr":
-                    found.append((node.lineno, _entry(names[1:]), f"import {alias.name}"))
+                    found.append((node.lineno, names[1:], f"import {alias.name}"))
         elif isinstance(node, ast.ImportFrom):
             if node.level == 0:
                 names = (node.module or "").split(".")
@@ -72,13 +81,24 @@ def imported_entries(path, tree):
                 target += node.module.split(".") if node.module else []
             text = f"from {'.' * node.level}{node.module or ''} import ..."
             if target:
-                found.append((node.lineno, target[0], text))
+                found.append((node.lineno, target, text))
             else:  # from the package itself: each name is an entry, or a name of the face
                 for alias in node.names:
                     name = alias.name
                     exists = (PACKAGE / name).is_dir() or (PACKAGE / f"{name}.py").is_file()
-                    found.append((node.lineno, name if exists else "__init__", text))
+                    found.append((node.lineno, [name] if exists else [], text))
     return found
+
+
+def imported_entries(path, tree):
+    """(line, entry, text) of every import of the package in a module, the entry it reaches."""
+    return [(line, _entry(target), text) for line, target, text in imported_paths(path, tree)]
+
+
+def _family_floor(family, parts):
+    """The floor inside ``family`` of a module path below it (its root: above the floors)."""
+    floors = FAMILY_FLOORS[family]
+    return floors.index(parts[0]) if parts and parts[0] in floors else len(floors)
 
 
 def _offences():
@@ -94,6 +114,25 @@ def _offences():
                     f"skhmmgmr/{path.relative_to(PACKAGE)}:{line}: {own} (layer {RANK[own]}) "
                     f"imports {entry} (layer {RANK[entry]}): {text}"
                 )
+    return offences
+
+
+def _family_offences():
+    offences = []
+    for family in FAMILY_FLOORS:
+        for path in sorted((PACKAGE / family).rglob("*.py")):
+            own = list(path.relative_to(PACKAGE / family).with_suffix("").parts)
+            tree = ast.parse(path.read_text(), filename=str(path))
+            for line, target, text in imported_paths(path, tree):
+                if _entry(target) != family:
+                    continue
+                # the face (``__init__``) is the root's
+                mine, theirs = _family_floor(family, own), _family_floor(family, target[1:])
+                if theirs > mine:
+                    offences.append(
+                        f"skhmmgmr/{path.relative_to(PACKAGE)}:{line}: floor {mine} of {family} "
+                        f"imports floor {theirs}: {text}"
+                    )
     return offences
 
 
@@ -132,6 +171,29 @@ def test_no_module_imports_its_own_layer_or_a_higher_one():
 def test_the_rule_reads_every_kind_of_import(file, source, expected):
     found = imported_entries(PACKAGE / file, ast.parse(source))
     assert [entry for _, entry, _ in found] == [expected]
+
+
+def test_no_module_of_a_family_imports_a_floor_of_the_family_above_its_own():
+    for family, floors in FAMILY_FLOORS.items():
+        assert all((PACKAGE / family / floor / "__init__.py").is_file() for floor in floors)
+    offences = _family_offences()
+    assert not offences, "imports that run up a family's floors:\n" + "\n".join(offences)
+
+
+@pytest.mark.parametrize(
+    "file, source, expected",
+    [
+        ("selection/_search/base.py", "from .._selectors._states import x", 1),
+        ("selection/_search/base.py", "from .. import select_parameters", 2),
+        ("selection/_search/base.py", "from skhmmgmr.selection._framework import x", 2),
+        ("selection/_selectors/_states.py", "from .._search.base import x", 0),
+        ("selection/_framework.py", "from ._selectors._states import x", 1),
+    ],
+)
+def test_the_family_rule_reads_the_floor_an_import_reaches(file, source, expected):
+    ((_, target, _),) = imported_paths(PACKAGE / file, ast.parse(source))
+    assert _entry(target) == "selection"
+    assert _family_floor("selection", target[1:]) == expected
 
 
 def test_the_rule_reports_an_import_that_runs_up():

@@ -53,6 +53,7 @@ def test_init_stores_parameters_verbatim():
         "reg_covar": 1e-3,
         "missing_values": "error",
         "output_smoothing": None,
+        "min_log_density": None,
         "random_state": 4,
         "verbose": 0,
     }

@@ -7,6 +7,7 @@ transform, and a plain loop of the velocity filter."""
 
 import math
 import pickle
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -154,16 +155,17 @@ def _regressor_stream(pipeline, X, **kwargs):
 def test_a_held_row_still_feeds_the_velocity_filter(data, filtered, column, value):
     """Rule: a held (outlier) row is held by the regressor, but its velocity goes through
     the velocity filter as predict's transform takes it, so the derived inputs of the rows
-    after it are predict's."""
+    after it are predict's. (The far rows are held by the hold setting, the -1e300 one for
+    being out of the model's range.)"""
     X, _, groups = _split(data)
     rows = X[groups == groups[1]].copy()
     held = [40, 41, 300]
     rows.iloc[held, rows.columns.get_loc(column)] = value
-    stream = filtered.filter_stream()
+    stream = filtered.filter_stream(min_log_density=-1e3)
     got, flags = stream.update_batch(rows.to_numpy(), return_flag=True)
     assert [i for i, flag in enumerate(flags) if flag == "outlier"] == held
     # the regressor's stream on predict's derived rows
-    derived, reference = _regressor_stream(filtered, rows)
+    derived, reference = _regressor_stream(filtered, rows, min_log_density=-1e3)
     expected, expected_flags = reference.update_batch(derived, return_flag=True)
     np.testing.assert_allclose(got, expected, rtol=0, atol=ATOL)
     assert list(flags) == list(expected_flags)
@@ -349,3 +351,29 @@ def test_the_velocity_filter_of_the_stream_is_a_plain_loop():
     values = [0.05]
     stage.append(values)
     assert values[1] == pytest.approx(math.tanh(0.5), abs=1e-15)  # starts at the value again
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+def test_a_huge_load_is_held_as_predict_refuses_it(data, filtered, tmp_path):
+    """#51: a finite load of 1e200 raised OverflowError from the derived inputs (its cube);
+    the stream now holds it as the C filter does (its cube is infinite: non-finite), and a
+    load of 1e60, whose cube is finite but out of the model's range, as an outlier; predict
+    refuses both, naming the column."""
+    X, _, groups = _split(data)
+    rows = X[groups == groups[1]].iloc[:50].copy()
+    angle = rows.columns.get_loc("steering_wheel_angle")
+    rows.iloc[10, angle], rows.iloc[20, angle] = 1e200, 1e60
+    stream = filtered.filter_stream()
+    got, flags = stream.update_batch(rows.to_numpy(), return_flag=True)
+    assert (flags[10], flags[20]) == ("non-finite", "outlier") and np.isfinite(got).all()
+    assert got[10] == got[9] and got[20] == got[19]
+    assert stream.reset().update(rows.to_numpy()[10], return_flag=True)[1] == "non-finite"
+    with pytest.raises(ValueError, match="infinity in column 'steering_wheel_angle_signed_sq"):
+        filtered.predict(rows.iloc[:15])
+    with pytest.raises(ValueError, match="out of the model's range.*'steering_wheel_angle_cube'"):
+        filtered.predict(rows.iloc[15:25])
+    if shutil.which("cc"):  # the C filter holds them with the same codes
+        from test_export_c import Compiled
+
+        codes = Compiled(filtered, tmp_path).run(rows, np.zeros(len(rows)))[2]
+        assert codes[[10, 20]].tolist() == [1, 2] and np.count_nonzero(codes) == 2

@@ -242,7 +242,7 @@ def test_relevance_sources_are_checked(protocol):
             progress=False,
             relevance_sources={"combined": ForwardFeatureSelector()},
         )
-    with pytest.raises(ValueError, match="features must be one of"):
+    with pytest.raises(ValueError, match="'features' parameter of RelevanceSource"):
         select_parameters(
             protocol,
             k_max=2,

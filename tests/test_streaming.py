@@ -38,21 +38,21 @@ def model(data):
 
 
 def stream_recordings(stream, X, groups):
-    estimates, stds, alphas = [], [], []
+    """Estimates, stds, state probabilities and flags of every row, streamed recording by
+    recording after a reset."""
+    results = []
     for rec in pd.unique(groups):
         stream.reset()
         for row in X[groups == rec]:
-            estimate, std = stream.update(row, return_std=True)
-            estimates.append(estimate)
-            stds.append(std)
-            alphas.append(stream.state_proba_)
-    return np.array(estimates), np.array(stds), np.array(alphas)
+            estimate, std, flag = stream.update(row, return_std=True, return_flag=True)
+            results.append((estimate, std, stream.state_proba_, flag))
+    return tuple(np.array(column) for column in zip(*results, strict=True))
 
 
 def test_stream_matches_predict_across_recordings(data, model):
     X, _, groups = data
     stream = model.filter_stream()
-    estimates, stds, alphas = stream_recordings(stream, X, groups)
+    estimates, stds, alphas, _ = stream_recordings(stream, X, groups)
     predicted, predicted_std = model.predict(X, groups=groups, return_std=True)
     np.testing.assert_allclose(estimates, predicted, rtol=0, atol=1e-12)
     np.testing.assert_allclose(stds, predicted_std, rtol=0, atol=1e-12)
@@ -138,21 +138,21 @@ def test_unfitted_model_raises():
 
 
 @pytest.mark.parametrize(
-    "bad, flag",
+    "bad, flag, min_log_density",
     [
-        ([np.nan, 0.0, 0.0], "non-finite"),
-        ([0.0, np.inf, 0.0], "non-finite"),
-        ([0.0, 0.0, -np.inf], "non-finite"),
-        ([1e4, -1e4, 1e4], "outlier"),
-        ([1e200, 1e200, -1e200], "outlier"),
+        ([np.nan, 0.0, 0.0], "non-finite", None),
+        ([0.0, np.inf, 0.0], "non-finite", None),
+        ([0.0, 0.0, -np.inf], "non-finite", None),
+        ([1e4, -1e4, 1e4], "outlier", -1e3),  # far from every state, with the hold setting
+        ([1e200, 1e200, -1e200], "outlier", None),  # out of the model's range
     ],
 )
-def test_held_sample_does_not_poison_the_filter(data, model, bad, flag):
+def test_held_sample_does_not_poison_the_filter(data, model, bad, flag, min_log_density):
     X, _, groups = data
     rows = X[groups == "rec0"]
     clean = model.filter_stream()
     expected = [clean.update(row) for row in rows[:60]]
-    stream = model.filter_stream()
+    stream = model.filter_stream(min_log_density=min_log_density)
     got = [stream.update(row) for row in rows[:30]]
     alpha_before = stream.state_proba_
     held, held_std, got_flag = stream.update(np.array(bad), return_std=True, return_flag=True)
@@ -230,3 +230,129 @@ def test_state_proba_is_a_copy(model, data):
 def test_public_export(model):
     assert "FilterStream" in skhmmgmr.__all__
     assert isinstance(model.filter_stream(), FilterStream)
+
+
+def _outlying(X, rng, n=12):
+    """``X`` with far samples: 50 to 1e4 times the data's spread, alone and in runs."""
+    X = np.array(X, dtype=float)
+    rows = rng.choice(np.arange(X.shape[0]), size=n, replace=False)
+    X[rows] *= rng.choice([50.0, 1e3, 1e4], size=(n, 1))
+    X[[0, 1]] *= 1e3  # at the start of a recording: before any accepted sample
+    return X
+
+
+def test_far_samples_are_filtered_as_predict_filters_them(data, model):
+    """#51: the stream held every sample whose densities all underflowed (log-density below
+    log(DBL_MIN)), where predict filtered it: the forward step is in log space now."""
+    X, _, groups = data
+    X = _outlying(X, np.random.default_rng(0))
+    assert (model.input_log_density(X, groups=groups) < math.log(np.finfo(float).tiny)).any()
+    estimates, stds, alphas, flags = stream_recordings(model.filter_stream(), X, groups)
+    expected, expected_std = model.predict(X, groups=groups, return_std=True)
+    assert set(flags) <= {"ok", "restarted"}
+    # far samples extrapolate a state's regression to large estimates: round-off relative
+    np.testing.assert_allclose(estimates, expected, rtol=1e-14, atol=1e-12)
+    np.testing.assert_allclose(stds, expected_std, rtol=1e-14, atol=1e-12)
+    np.testing.assert_allclose(alphas, model.predict_state_proba(X, groups=groups), atol=1e-12)
+
+
+@pytest.mark.parametrize("n_outputs, smoothing", [(1, None), (1, 4.0), (2, 4.0)])
+def test_predict_holds_the_samples_the_stream_holds(n_outputs, smoothing):
+    """With min_log_density set, predict, predict_state_proba and predict_ahead(0) hold the
+    rows below it as the stream does: the state, the read-out and the estimate of the last
+    accepted row (the prior mixture before any)."""
+    X, y, groups = make_recordings(n_outputs=n_outputs, length=150)
+    model = HMMGMRRegressor(n_states=3, output_smoothing=smoothing, random_state=0)
+    model.fit(X, y, groups=groups)
+    X = _outlying(X, np.random.default_rng(1))
+    threshold = -40.0
+    expected_held = model.input_log_density(X, groups=groups) < threshold
+    assert 5 <= expected_held.sum() < 40
+    model.set_params(min_log_density=threshold)  # read at prediction time: no refit
+    estimates, stds, alphas, flags = stream_recordings(model.filter_stream(), X, groups)
+    np.testing.assert_array_equal(flags == "outlier", expected_held)
+    predicted, predicted_std = model.predict(X, groups=groups, return_std=True)
+    np.testing.assert_allclose(predicted, estimates, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(predicted_std, stds, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(model.predict_state_proba(X, groups=groups), alphas, atol=1e-12)
+    ahead = model.predict_ahead(X, 0, groups=groups, return_std=True)
+    np.testing.assert_allclose(ahead[0], predicted, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ahead[1], predicted_std, rtol=0, atol=1e-12)
+    # a forecast from a held row is that of the last accepted row of its recording
+    forecast = model.predict_ahead(X, 5, groups=groups)
+    rows = np.flatnonzero(expected_held[1:] & (groups[1:] == groups[:-1])) + 1
+    rows = rows[~expected_held[rows - 1]]
+    np.testing.assert_array_equal(forecast[rows], forecast[rows - 1])
+    # the first rows of a recording are held: the prior mixture
+    prior = model.filter_stream().update(np.full(3, np.nan), return_std=True)
+    np.testing.assert_allclose(predicted[0], prior[0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(predicted_std[0], prior[1], rtol=0, atol=1e-12)
+    assert model.set_params(min_log_density=None).predict(X[:1]).shape == predicted[:1].shape
+
+
+def test_the_hold_setting_is_the_estimators_and_refused_when_not_a_number(model):
+    """#51: min_log_density=nan was taken, and then every sample was held."""
+    assert model.filter_stream().min_log_density is None
+    assert FilterStream(model.model_).min_log_density is None
+    assert model.filter_stream(min_log_density=-3).min_log_density == -3.0
+    holding = HMMGMRRegressor.from_fitted_model(model.model_, min_log_density=-7.5)
+    assert holding.filter_stream().min_log_density == -7.5
+    for bad in (np.nan, np.inf, -np.inf, "low", True):
+        with pytest.raises(ValueError, match="'min_log_density' parameter of FilterStream"):
+            FilterStream(model, min_log_density=bad)
+        with pytest.raises(ValueError, match="'min_log_density' parameter of HMMGMRRegressor"):
+            HMMGMRRegressor(min_log_density=bad).fit(*make_recordings(length=40)[:2])
+
+
+def test_the_model_file_keeps_the_hold_setting(data, model, tmp_path):
+    from skhmmgmr import portable
+
+    X, _, groups = data
+    holding = HMMGMRRegressor.from_fitted_model(model.model_, min_log_density=-30.0)
+    portable.save(holding, tmp_path / "holding.json")
+    restored = portable.load(tmp_path / "holding.json")
+    assert restored.min_log_density == -30.0
+    far = _outlying(X, np.random.default_rng(2))
+    np.testing.assert_array_equal(
+        restored.predict(far, groups=groups), holding.predict(far, groups=groups)
+    )
+    portable.save(model, tmp_path / "plain.json")
+    assert portable.load(tmp_path / "plain.json").min_log_density is None
+
+
+def test_predict_refuses_inputs_out_of_the_models_range(model):
+    X = np.zeros((4, 3))
+    X[2, 1] = 1e200
+    with pytest.raises(ValueError, match=r"out of the model's range in recording 0 \(row 2.*'x1'"):
+        model.predict(X)
+    stream = model.filter_stream()
+    assert list(stream.update_batch(X, return_flag=True)[1]) == ["ok", "ok", "outlier", "ok"]
+
+
+@pytest.mark.parametrize(
+    "row, message",
+    [
+        (np.array(["1", "2", "3"]), "features must hold real numbers.*<U1"),
+        (np.array([1.0, 2.0, 3j]), "features must hold real numbers.*complex128"),
+        (np.array([1.0, "a", 2.0], dtype=object), "features must hold real numbers.*object"),
+        ({"a": [1.0, 2.0], "b": 0.0, "c": 0.0}, r"features\['a'\] is \[1.0, 2.0\], not a number"),
+        ({"a": "1.5", "b": 0.0, "c": 0.0}, r"features\['a'\] is '1.5', not a number"),
+        (pd.Series([1.0, 2.0, 3.0, 4.0], index=["a", "b", "c", "a"]), r"label\(s\) \['a'\] more"),
+    ],
+)
+def test_rows_that_are_not_real_numbers_are_refused_naming_the_input(row, message):
+    X, y, groups = make_recordings(length=60)
+    frame = pd.DataFrame(X, columns=["a", "b", "c"])
+    stream = HMMGMRRegressor(n_states=2, n_iter=5, random_state=0).fit(frame, y).filter_stream()
+    with pytest.raises(ValueError, match=message):
+        stream.update(row)
+    assert stream.n_samples_ == 0
+    with pytest.raises(ValueError, match="X's column 'b' holds"):
+        stream.update_batch(frame.assign(b="x"))
+    with pytest.raises(ValueError, match="X must hold real numbers"):
+        stream.update_batch(X.astype(complex))
+    # numbers in an object array, and numpy scalars by name, are numbers
+    assert (
+        stream.update(np.array([0.1, 2, np.float32(3)], dtype=object), return_flag=True)[1] == "ok"
+    )
+    assert stream.update({"a": np.float64(0.1), "b": np.int64(2), "c": 3.0}) is not None

@@ -6,7 +6,8 @@
  * input: the sample is held (code 1).
  * Output: a header line, then estimate_0.., std_0.. and the update's return code per sample.
  *
- * Build with the generated skhmmgmr_model.h and skhmmgmr_model.c:
+ * Build with the generated skhmmgmr_model.h and skhmmgmr_model.c (double or float32: the
+ * numbers are the filter's own, skhmmgmr_model_real):
  *   cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic -o estimate estimate.c skhmmgmr_model.c -lm
  */
 #include <math.h>
@@ -20,7 +21,7 @@
 #define N_OUTPUTS SKHMMGMR_MODEL_N_OUTPUTS
 
 /* Read the inputs after the recording id; returns 0 unless the line holds N_INPUTS numbers. */
-static int read_inputs(const char *field, double *inputs)
+static int read_inputs(const char *field, skhmmgmr_model_real *inputs)
 {
     char *end;
     int i;
@@ -29,9 +30,9 @@ static int read_inputs(const char *field, double *inputs)
             return 0;
         }
         ++field;
-        inputs[i] = strtod(field, &end);
+        inputs[i] = (skhmmgmr_model_real)strtod(field, &end);
         if (end == field) {
-            inputs[i] = NAN; /* an empty field */
+            inputs[i] = (skhmmgmr_model_real)NAN; /* an empty field */
         }
         field = end;
     }
@@ -42,7 +43,7 @@ int main(void)
 {
     static char line[1 << 16];
     char recording[256] = "";
-    double inputs[N_INPUTS], estimate[N_OUTPUTS], std[N_OUTPUTS];
+    skhmmgmr_model_real inputs[N_INPUTS], estimate[N_OUTPUTS], std[N_OUTPUTS];
     skhmmgmr_model_state state; /* the filter state: on the stack, no heap */
     long number = 1;
     int i, code;
@@ -72,10 +73,10 @@ int main(void)
         }
         code = skhmmgmr_model_update(&state, inputs, estimate, std);
         for (i = 0; i < N_OUTPUTS; ++i) {
-            printf("%.17g,", estimate[i]);
+            printf("%.17g,", (double)estimate[i]);
         }
         for (i = 0; i < N_OUTPUTS; ++i) {
-            printf("%.17g,", std[i]);
+            printf("%.17g,", (double)std[i]);
         }
         printf("%d\n", code);
     }

@@ -76,12 +76,10 @@ def check_finite(values, *, name, column_names, recordings, allow_nan=False):
     row, column = int(rows[0]), int(columns[0])
     bad_value = values[row, column]
     kind = "NaN" if np.isnan(bad_value) else "infinity"
-    recording = recordings.recording_of_row(row)
-    start = int(recordings.starts[np.searchsorted(recordings.stops, row, side="right")])
     n_bad = int((~finite).sum())
     raise ValueError(
-        f"Input {name} contains {kind} in column {column_names[column]!r} of recording "
-        f"{_shown(recording)} (row {row - start} of the recording, row {row} overall; {n_bad} "
+        f"Input {name} contains {kind} in column {column_names[column]!r} of "
+        f"{row_location(recordings, row)[:-1]}; {n_bad} "
         + (
             "infinite value(s) in all). An infinity is not a missing value: replace it by NaN "
             "or drop it."
@@ -89,6 +87,17 @@ def check_finite(values, *, name, column_names, recordings, allow_nan=False):
             else "non-finite value(s) in all). Fill or drop them before fitting or predicting: "
             "a NaN or infinity cannot be filtered."
         )
+    )
+
+
+def row_location(recordings, row):
+    """Where ``row`` (a position in filter order) is, for a message: ``"recording 'a' (row 3
+    of the recording, row 203 overall)"``."""
+    index = int(np.searchsorted(recordings.stops, row, side="right"))
+    start = int(recordings.starts[index])
+    return (
+        f"recording {_shown(recordings.ids[index])} (row {row - start} of the recording, "
+        f"row {row} overall)"
     )
 
 

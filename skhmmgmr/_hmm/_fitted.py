@@ -6,7 +6,8 @@ import numpy as np
 
 from .._core._pickled import PickleVersionMixin
 from ._em import HMMParameters
-from ._gmr import condition_on_inputs
+from ._gmr import causal_filter, condition_on_inputs, gmr_estimates
+from ._readout import smooth_outputs
 
 
 def _frozen(array):
@@ -254,6 +255,47 @@ class FittedHMMGMR(PickleVersionMixin):
         """Free parameters: start and transition probabilities and the state densities."""
         n_states = self.n_states
         return int((n_states - 1) + n_states * (n_states - 1) + self.emissions.n_parameters())
+
+    def predict_outputs(
+        self, standardized, recordings, *, missing=None, min_log_density=None, return_std=False
+    ):
+        """The causal estimates of the outputs, as ``predict`` gives them, in filter order.
+
+        Parameters
+        ----------
+        standardized : ndarray of shape (n_samples, n_inputs)
+            Standardised inputs, in filter order.
+        recordings : Recordings
+        missing : MissingRows, default=None
+            The rows that miss an input (:func:`~skhmmgmr._hmm._gmr.read_missing`).
+        min_log_density : float, default=None
+            The outlier policy's threshold (:mod:`skhmmgmr._hmm._holds`): held rows show the
+            estimate and std of the last accepted row of their recording, the prior
+            mixture's (:meth:`prior_output`) before any.
+        return_std : bool, default=False
+
+        Returns
+        -------
+        estimate, std : ndarray of shape (n_samples, n_outputs)
+            In the data's units, the estimate through the read-out (``output_decay``); std
+            None unless ``return_std``.
+        alpha : ndarray of shape (n_samples, n_states)
+            The filtered state probabilities.
+        """
+        gmr = self.gmr
+        alpha, holds = causal_filter(
+            standardized, recordings, gmr, missing=missing, min_log_density=min_log_density
+        )
+        estimate, std = gmr_estimates(standardized, alpha, gmr, return_std, missing=missing)
+        estimate = self.standardization.outputs(estimate)
+        estimate = smooth_outputs(estimate, recordings, self.output_decay, holds)
+        if return_std:
+            std = self.standardization.output_std(std)
+        if holds is not None:
+            prior_mean, prior_std = self.prior_output()
+            estimate = holds.carry(estimate, prior_mean)
+            std = None if std is None else holds.carry(std, prior_std)
+        return estimate, std, alpha
 
     def prior_output(self):
         """Output mean and std under the start probabilities (before any input is seen), in

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._gaussian import augmented_columns, chunk_size_for
+from ._holds import HeldRows, check_top_finite
 from ._kernels import forward
 from ._missing import MissingRows
 
@@ -66,17 +67,48 @@ def read_missing(X, recordings, stale_noise=None):
     return MissingRows.of(X.T, stale=stale)
 
 
-def filter_state_probabilities(X, recordings, params, chunk_size=None, missing=None):
-    """Filtered state probabilities ``alpha_t,k`` given the inputs up to ``t``.
+def filter_state_probabilities(X, recordings, params, chunk_size=None, missing=None, **holding):
+    """Filtered state probabilities ``alpha_t,k`` given the inputs up to ``t``: those of
+    :func:`causal_filter` (``holding``: its ``min_log_density``)."""
+    return causal_filter(X, recordings, params, chunk_size=chunk_size, missing=missing, **holding)[
+        0
+    ]
+
+
+def causal_filter(X, recordings, params, *, chunk_size=None, missing=None, min_log_density=None):
+    """Filtered state probabilities ``alpha_t,k`` given the inputs up to ``t``, and the rows
+    the outlier policy holds (a :class:`~skhmmgmr._hmm._holds.HeldRows`, None when none is).
 
     The recursion restarts from the start probabilities at the first row of every recording.
-    The input densities are computed chunk by chunk (all states in one product per chunk).
-    When no state that the transitions allow explains a row (every product underflows), the
-    recursion restarts at that row from the input densities alone instead of producing NaN.
-    A row with missing inputs (NaN) takes the densities of its observed inputs (and of the
-    carried values of the missing ones when ``missing``, from :func:`read_missing`, holds
-    them; None: read here from ``X``).
+    The input densities are computed chunk by chunk (all states in one product per chunk),
+    relative to the row's best state. When no state that the transitions allow explains a row
+    (every product underflows), the recursion restarts at that row from the input densities
+    alone instead of producing NaN. A row with missing inputs (NaN) takes the densities of its
+    observed inputs (and of the carried values of the missing ones when ``missing``, from
+    :func:`read_missing`, holds them; None: read here from ``X``). A row whose largest input
+    log-density is not finite is refused, and with ``min_log_density`` a row whose largest
+    one is below it is held: its state probabilities are those of the last accepted row of
+    its recording (the start probabilities before any), and the recursion goes on from there
+    (:mod:`skhmmgmr._hmm._holds`).
     """
+    frames, top, missing = scaled_input_densities(X, params, chunk_size, missing)
+    check_top_finite(top, recordings)
+    unobserved = None
+    if min_log_density is not None and missing is not None:
+        unobserved = missing.rows[missing.missing.all(axis=1)]
+    holds = HeldRows.of(top, recordings, min_log_density, unobserved)
+    if holds is not None:
+        accepted = holds.accepted_rows
+        alpha = _forward(frames[accepted], holds.accepted, params)
+        return holds.expand(alpha, params.startprob), holds
+    return _forward(frames, recordings, params), None
+
+
+def scaled_input_densities(X, params, chunk_size=None, missing=None):
+    """``(frames, top, missing)``: the input densities of the rows of ``X`` relative to each
+    row's best state (n_samples, n_states), the logarithms of the best ones (n_samples,), as
+    :func:`~skhmmgmr._hmm._kernels.scaled_densities` writes them, and the rows that miss an
+    input (``missing``, or read from ``X``; None when none does)."""
     n_samples = X.shape[0]
     n_states, n_inputs = params.n_states, params.gating.n_dims
     density = params.gating.density()
@@ -88,6 +120,11 @@ def filter_state_probabilities(X, recordings, params, chunk_size=None, missing=N
     missing = MissingRows.of(X.T) if missing is None else missing
     if missing is not None:
         missing.overwrite(params.gating, 0, n_samples, frames, top)
+    return frames, top, missing
+
+
+def _forward(frames, recordings, params):
+    """The normalised forward recursion with restarts over ``frames`` (C-contiguous)."""
     alpha = np.empty_like(frames)
     forward(
         frames,
@@ -96,7 +133,7 @@ def filter_state_probabilities(X, recordings, params, chunk_size=None, missing=N
         params.startprob,
         params.transmat,
         alpha,
-        np.empty(n_samples),
+        np.empty(frames.shape[0]),
         restart=True,
     )
     return alpha

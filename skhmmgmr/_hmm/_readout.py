@@ -55,13 +55,20 @@ def time_constant_of(decay):
     return -1.0 / math.log(decay) if decay > 0 else 0.0
 
 
-def smooth_outputs(estimates, recordings, decay):
+def smooth_outputs(estimates, recordings, decay, holds=None):
     """``estimates`` (n_samples, n_outputs), in filter order, through the first-order read-out
     of decay ``decay[j]`` for output ``j``, restarted at every recording; a new array (the
-    input itself when every decay is 0)."""
+    input itself when every decay is 0). ``holds`` (a
+    :class:`~skhmmgmr._hmm._holds.HeldRows`): the read-out runs over the accepted rows only,
+    the held ones are left as they are (the caller carries them)."""
     decay = np.asarray(decay, dtype=float)
     if not np.any(decay):
         return estimates
+    if holds is not None:
+        rows = holds.accepted_rows
+        smoothed = np.array(estimates, dtype=float)
+        smoothed[rows] = smooth_outputs(estimates[rows], holds.accepted, decay)
+        return smoothed
     smoothed = np.array(estimates, dtype=float)
     for j, a in enumerate(decay.tolist()):
         if a > 0:

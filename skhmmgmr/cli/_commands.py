@@ -1,10 +1,11 @@
-"""Command line: ``skhmmgmr demo | select | report | fit | predict | export-c`` (``python -m
-skhmmgmr``).
+"""Command line: ``skhmmgmr demo | select | report | fit | predict | export-c | export-fmu``
+(``python -m skhmmgmr``).
 
 Every sub-command lives in the module of its idea, as a ``command_*`` function run with the
 parsed options and an ``add_*`` function that declares them: the framework and its report
 (``demo``, ``select``, ``report``: :mod:`._framework`), ``fit`` (:mod:`._fit`), ``predict``
-(:mod:`._predict`) and the exports of a model file (``export-c``: :mod:`._export`). This
+(:mod:`._predict`) and the exports of a model file (``export-c``, ``export-fmu``:
+:mod:`._export`). This
 module lists them (:data:`COMMANDS`, in the order of ``--help``), builds the parser and runs a
 command.
 
@@ -17,7 +18,7 @@ import argparse
 import sys
 
 from .._version import __version__
-from ._export import add_export_c
+from ._export import add_export_c, add_export_fmu
 from ._files import CommandError
 from ._fit import add_fit
 from ._framework import add_demo, add_report, add_select
@@ -26,7 +27,15 @@ from ._predict import add_predict
 
 #: The sub-commands, in the order ``skhmmgmr --help`` lists them: one ``add_*(sub, common)``
 #: each, which adds its parser to ``sub`` (with the ``common`` keywords) and its handler.
-COMMANDS = (add_demo, add_select, add_report, add_fit, add_predict, add_export_c)
+COMMANDS = (
+    add_demo,
+    add_select,
+    add_report,
+    add_fit,
+    add_predict,
+    add_export_c,
+    add_export_fmu,
+)
 
 
 def build_parser():

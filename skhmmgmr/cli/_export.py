@@ -1,4 +1,5 @@
-"""The exports of a model file: ``skhmmgmr export-c``, the C code of its causal filter.
+"""The exports of a model file: ``skhmmgmr export-c``, the C code of its causal filter, and
+``skhmmgmr export-fmu``, the model as a co-simulation Functional Mock-up Unit.
 
 An export command reads a model file written by ``fit`` (the portable JSON, never unpickled),
 checks every option and the files it will write before it makes anything (the package's rule
@@ -11,7 +12,7 @@ parser here, and one more line in the list of commands (``_commands.COMMANDS``).
 from pathlib import Path
 
 from ._files import CommandError, check_output, load_model
-from ._options import log
+from ._options import finite_float, log
 
 
 def _checked_files(args, folder, file_names, *, option):
@@ -49,8 +50,9 @@ def command_export_c(args):
     _checked_files(args, folder, [f"{name}.h", f"{name}.c"], option=f"--name {name}:")
     made = _missing_folders(folder)
     try:
-        folder.mkdir(parents=True, exist_ok=True)  # write_c writes into an existing folder
-        header, source = write_c(model, folder, name=name, dtype=args.dtype)
+        header, source = write_c(
+            model, folder, name=name, dtype=args.dtype, overwrite=args.overwrite
+        )
     except (ValueError, OSError) as exc:
         for empty in made:  # a refused model leaves nothing behind
             try:
@@ -90,3 +92,76 @@ def add_export_c(sub, common):
     )
     export.set_defaults(handler=command_export_c)
     return export
+
+
+def command_export_fmu(args):
+    """The FMU of a model file written by ``fit`` (:func:`skhmmgmr.export.write_fmu`), with the
+    file's output names, units and sampling period."""
+    import json
+
+    from ..export import write_fmu
+
+    model, training = load_model(args.model, return_training=True)
+    path = Path(args.path)
+    if path.exists() and not args.overwrite:
+        raise CommandError(f"PATH {path} exists; pass --overwrite to replace it")
+    check_output(path, option="PATH", overwrite=True, inputs=[args.model], create_folders=True)
+    data = json.loads(Path(args.model).read_text(encoding="utf-8"))  # valid: load read it
+    regressor = data["steps"][-1]["model"] if "steps" in data else data
+    period = args.sampling_period
+    if period is None:
+        period = training.get("sampling_period")
+    try:
+        written = write_fmu(
+            model,
+            path,
+            fmi_version=args.fmi_version,
+            name=args.name,
+            sampling_period=period,
+            output_names=regressor["output_names"],
+            units=training.get("units"),
+            binary=not args.sources_only,
+            overwrite=args.overwrite,
+        )
+    except ValueError as exc:
+        raise CommandError(f"{args.model}: {exc}") from exc
+    except (ImportError, RuntimeError) as exc:
+        raise CommandError(str(exc)) from exc
+    except OSError as exc:
+        raise CommandError(f"cannot write {path}: {exc.strerror or exc}") from exc
+    what = "sources only" if args.sources_only else "sources and a binary for this platform"
+    log(args, f"Wrote {written} (FMI {args.fmi_version}, {what})")
+    return 0
+
+
+def add_export_fmu(sub, common):
+    """The ``export-fmu`` sub-command and its options."""
+    fmu = sub.add_parser(
+        "export-fmu",
+        help="write a model as a co-simulation Functional Mock-up Unit (.fmu)",
+        description="Write a model file as a co-simulation FMU (FMI 2.0 or 3.0) for vehicle "
+        "simulators: the model's C filter, its FMI wrapper and a binary for this platform "
+        "built with the system C compiler (cc) against FMPy's FMI headers (pip install "
+        "'skhmmgmr[fmu]'); see the user guide, 'Using the model in a vehicle simulator'.",
+        **common,
+    )
+    fmu.add_argument("model", help="model file (portable JSON) written by 'skhmmgmr fit'")
+    fmu.add_argument("path", help="the .fmu file to write (its folder made if absent)")
+    fmu.add_argument("--fmi-version", choices=("2.0", "3.0"), default="2.0", help="FMI version")
+    fmu.add_argument(
+        "--name", help="model identifier: C prefix and binary name (default: the file's stem)"
+    )
+    fmu.add_argument(
+        "--sampling-period",
+        type=finite_float,
+        help="seconds between two samples, the FMU's communication step (default: the model "
+        "file's)",
+    )
+    fmu.add_argument(
+        "--sources-only",
+        action="store_true",
+        help="no binary: an FMU of sources the importer builds (needs no compiler)",
+    )
+    fmu.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    fmu.set_defaults(handler=command_export_fmu)
+    return fmu

@@ -1,7 +1,7 @@
 """The selection search on a dask cluster: the recordings shipped to the workers once.
 
 Under joblib's dask backend (``joblib.parallel_config(backend="dask")``) the evaluations of a
-search (:func:`~skhmmgmr._search._evaluation.evaluate_models`) are dask tasks. Their data, the
+search (``evaluate_models`` of ``selection/_search/_evaluation.py``) are dask tasks. Their data, the
 training and validation arrays of every split (a list of tuples of arrays, which joblib would
 pickle into every task), are scattered to every worker once instead (``broadcast=True``: a
 worker that dies leaves the other copies, so its tasks are rerun elsewhere), and every task

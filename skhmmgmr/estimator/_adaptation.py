@@ -32,7 +32,7 @@ from .._hmm._em import HMMParameters, e_step
 from .._hmm._em_data import Columns, EStepData
 from .._hmm._fitted import FittedHMMGMR
 from .._hmm._gaussian import NotPositiveDefiniteError
-from .._hmm._gmr import filter_state_probabilities, gmr_estimates, mix_estimates
+from .._hmm._gmr import causal_filter, gmr_estimates, mix_estimates
 from .._hmm._missing import observed_counts
 from .._hmm._readout import ahead_weights, smooth_outputs
 from ._prediction_inputs import read_inputs, read_joint_inputs
@@ -277,33 +277,47 @@ class AdaptMixin:
         # The rows in filter order, read once (with their missing values) for both steps.
         standardized, recordings, rows, missing = read_inputs(self, X, groups, time)
         model = self.model_
-        alpha = filter_state_probabilities(standardized, recordings, model.gmr, missing=missing)
+        alpha, holds = causal_filter(
+            standardized,
+            recordings,
+            model.gmr,
+            missing=missing,
+            min_log_density=self.min_log_density,
+        )
 
         def mixed(weights, with_std):
             if steps == 0 or state_output == "conditional":
                 return gmr_estimates(standardized, weights, model.gmr, with_std, missing)
             return marginal_estimates(weights, model, with_std)
 
-        estimate, std = mixed(alpha @ transition_power(model.transmat, steps), return_std)
+        ahead = transition_power(model.transmat, steps)
+        estimate, std = mixed(alpha @ ahead, return_std)
         estimate = model.standardization.outputs(estimate)
         if model.smoothed and steps == 0:  # the read-out now: predict's
-            estimate = smooth_outputs(estimate, recordings, model.output_decay)
+            estimate = smooth_outputs(estimate, recordings, model.output_decay, holds)
         elif model.smoothed:
             estimate = self._read_out_ahead(
-                estimate, alpha, mixed, standardized, recordings, steps, missing
+                estimate, alpha, mixed, standardized, recordings, steps, (missing, holds)
             )
+        if return_std:
+            std = model.standardization.output_std(std)
+        if holds is not None:  # a held row: the forecast of the last accepted one
+            estimate, std = _carry_forecasts(model, holds, ahead, steps, estimate, std)
         estimate = rows.to_caller_order(estimate[:, 0] if model.scalar_output else estimate)
         if not return_std:
             return estimate
-        std = model.standardization.output_std(std)
         return estimate, rows.to_caller_order(std[:, 0] if model.scalar_output else std)
 
-    def _read_out_ahead(self, estimate, alpha, mixed, standardized, recordings, steps, missing):
+    def _read_out_ahead(self, estimate, alpha, mixed, standardized, recordings, steps, rows):
         """The forecast ``estimate`` of the GMR estimate, turned into that of the smoothed
-        read-out (:func:`~skhmmgmr._hmm._readout.ahead_weights`), output by output."""
+        read-out (:func:`~skhmmgmr._hmm._readout.ahead_weights`), output by output;
+        ``rows``: the rows that miss an input and the held ones."""
         model = self.model_
+        missing, holds = rows
         now, _ = gmr_estimates(standardized, alpha, model.gmr, False, missing)
-        now = smooth_outputs(model.standardization.outputs(now), recordings, model.output_decay)
+        now = smooth_outputs(
+            model.standardization.outputs(now), recordings, model.output_decay, holds
+        )
         estimate = np.array(estimate)
         for j, decay in enumerate(model.output_decay.tolist()):
             carried, weights = ahead_weights(model.transmat, decay, steps)
@@ -339,6 +353,23 @@ def transition_power(transmat, steps):
         if steps:
             base = stochastic(base @ base)
     return result
+
+
+def _carry_forecasts(model, holds, ahead, steps, estimate, std):
+    """The forecasts (data units) with every held row showing that of the last accepted row
+    of its recording; before any, that of the start probabilities: the prior mixture's output
+    (``steps=0``, as ``predict``) or the states' outputs mixed by ``startprob A^steps``."""
+    if steps == 0:
+        before, before_std = model.prior_output()
+    else:
+        before, before_std = marginal_estimates(
+            model.startprob[np.newaxis] @ ahead, model, std is not None
+        )
+        before = model.standardization.outputs(before)[0]
+        if before_std is not None:
+            before_std = model.standardization.output_std(before_std)[0]
+    estimate = holds.carry(estimate, before)
+    return estimate, None if std is None else holds.carry(std, before_std)
 
 
 def marginal_estimates(ahead, model, return_std=False):

@@ -90,6 +90,8 @@ class HierarchicalHMMGMRRegressor(HMMGMRRegressor):
         What a NaN means (see :class:`HMMGMRRegressor`).
     output_smoothing : None, float in [0, 1e6] or "auto", default=None
         Causal first-order read-out of the estimate (see :class:`HMMGMRRegressor`).
+    min_log_density : float or None, default=None
+        The outlier policy: which samples the filter holds (see :class:`HMMGMRRegressor`).
     random_state : int, RandomState instance or None, default=None
         Seed of the initialisations.
     verbose : int, default=0
@@ -166,6 +168,7 @@ output_smoothing_
         reg_covar=1e-6,
         missing_values="error",
         output_smoothing=None,
+        min_log_density=None,
         random_state=None,
         verbose=0,
     ):
@@ -181,6 +184,7 @@ output_smoothing_
         self.reg_covar = reg_covar
         self.missing_values = missing_values
         self.output_smoothing = output_smoothing
+        self.min_log_density = min_log_density
         self.random_state = random_state
         self.verbose = verbose
 

@@ -175,8 +175,9 @@ class ModelIOMixin:
         Parameters
         ----------
         **kwargs : dict
-            Passed to :class:`~skhmmgmr.FilterStream` (``min_log_density``; ``missing_values``
-            defaults to the estimator's).
+            Passed to :class:`~skhmmgmr.FilterStream` (``relevance``, ``forgetting``...;
+            ``missing_values`` and ``min_log_density``, the outlier policy, default to the
+            estimator's, as ``predict`` follows them).
 
         Returns
         -------

@@ -2,7 +2,8 @@
 for the methods that read inputs and outputs (fit, adapt, log_likelihood), :func:`read_inputs`
 for those that read inputs only (predict and the filter's other read-outs): the rows in filter
 order, their recordings, the validated values, and for a prediction the standardised inputs
-and the rows that miss a value (read once for the filter and the read-out)."""
+and the rows that miss a value (read once for the filter and the read-out); inputs out of the
+model's range are refused (:mod:`skhmmgmr._hmm._holds`)."""
 
 import warnings
 from dataclasses import dataclass
@@ -18,6 +19,7 @@ from .._core._validation import (
     validate_joint,
 )
 from .._hmm._gmr import read_missing
+from .._hmm._holds import check_in_range
 from .._hmm._stale_inputs import stale_noise_for
 
 
@@ -39,6 +41,7 @@ def read_inputs(estimator, X, groups, time):
     check_finite(X, name="X", column_names=names, recordings=recordings, allow_nan=allow_nan)
     model = estimator.model_
     standardized = model.standardization.inputs(X)
+    check_in_range(standardized, column_names=names, recordings=recordings)
     noise = stale_noise_for(model, estimator.missing_values)
     return standardized, recordings, layout, read_missing(standardized, recordings, noise)
 

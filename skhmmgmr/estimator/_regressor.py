@@ -23,12 +23,12 @@ from .._hmm._em_data import Columns
 from .._hmm._em_init import INIT_METHODS
 from .._hmm._emissions import EMISSION_FAMILIES, REFUSED_COVARIANCE_TYPES, emission_family
 from .._hmm._fitted import FittedHMMGMR, Standardization
-from .._hmm._gmr import filter_state_probabilities, gmr_estimates, read_missing
+from .._hmm._gmr import filter_state_probabilities, read_missing, scaled_input_densities
+from .._hmm._holds import MIN_LOG_DENSITY_CONSTRAINT
 from .._hmm._missing import observed_counts
 from .._hmm._readout import (
     MAX_TIME_CONSTANT,
     fixed_decay,
-    smooth_outputs,
     time_constant_of,
     weakest_decay,
 )
@@ -109,6 +109,19 @@ class HMMGMRRegressor(
         longest "auto" considers (single precision, as in the C export's float32, could not
         tell a longer one's decay from one). ``return_std`` gives the model's predictive
         standard deviation either way. See the user guide, "Smooth by design".
+    min_log_density : float or None, default=None
+        The outlier policy, the same in ``predict``, :class:`~skhmmgmr.FilterStream` and the
+        generated C code (:func:`skhmmgmr.export.write_c`). None: no sample is held; the
+        filter works in log space, so that a sample far from every state is filtered as any
+        other. A number: a sample whose input log-density (in the standardised units the
+        model works in; the largest over the states) is below it is *held*: the estimate,
+        its std and the state probabilities stay those of the last accepted sample of the
+        recording (the prior mixture's before any), and the filter goes on as if the sample
+        had not come. The training rows' own log-densities tell what is usual
+        (:meth:`input_log_density`). Read at prediction time: ``set_params`` on a fitted
+        model takes effect without a refit. Inputs whose standardised absolute values sum
+        to 1e100 or more are out of the model's range either way: ``predict`` refuses them,
+        the stream and the C code hold them. See the user guide, "Held samples".
     random_state : int, RandomState instance or None, default=None
         Seed of the initialisation, for reproducible fits.
     verbose : int, default=0
@@ -210,6 +223,7 @@ class HMMGMRRegressor(
             FiniteInterval(Real, 0, MAX_TIME_CONSTANT, closed="both"),
             StrOptions({"auto"}),
         ],
+        "min_log_density": MIN_LOG_DENSITY_CONSTRAINT,
         "random_state": ["random_state"],
         "verbose": ["verbose"],
     }
@@ -234,6 +248,7 @@ class HMMGMRRegressor(
         reg_covar=1e-6,
         missing_values="error",
         output_smoothing=None,
+        min_log_density=None,
         random_state=None,
         verbose=0,
     ):
@@ -246,6 +261,7 @@ class HMMGMRRegressor(
         self.reg_covar = reg_covar
         self.missing_values = missing_values
         self.output_smoothing = output_smoothing
+        self.min_log_density = min_log_density
         self.random_state = random_state
         self.verbose = verbose
 
@@ -288,8 +304,9 @@ class HMMGMRRegressor(
         return self
 
     def __setstate__(self, state):
-        # an estimator pickled before ``output_smoothing`` existed had none
-        super().__setstate__({"output_smoothing": None, **state})
+        # an estimator pickled before ``output_smoothing`` or ``min_log_density`` existed had
+        # neither
+        super().__setstate__({"output_smoothing": None, "min_log_density": None, **state})
 
     def _standardized(self, inputs, n_states):
         """``(columns, (center, scale), stale_noise)`` of the joint ``inputs`` of a fit of
@@ -354,9 +371,9 @@ class HMMGMRRegressor(
         standardized = model.standardization.inputs(inputs.X)
         noise = stale_noise_for(model, self.missing_values)
         missing = read_missing(standardized, recordings, noise)
-        alpha = filter_state_probabilities(standardized, recordings, model.gmr, missing=missing)
-        estimate, _ = gmr_estimates(standardized, alpha, model.gmr, False, missing=missing)
-        estimate = model.standardization.outputs(estimate)
+        estimate, _, _ = model.predict_outputs(  # no read-out yet: the GMR estimate
+            standardized, recordings, missing=missing, min_log_density=self.min_log_density
+        )
         return weakest_decay(estimate, inputs.Y, recordings)
 
     def _baum_welch(self, columns, recordings):
@@ -400,6 +417,44 @@ class HMMGMRRegressor(
         constants = np.array([time_constant_of(a) for a in self.model_.output_decay.tolist()])
         return float(constants[0]) if self.model_.scalar_output else constants
 
+    def input_log_density(self, X, groups=None, time=None):
+        """The log-density of every row's inputs under its nearest state, as the outlier
+        policy reads it (``min_log_density``).
+
+        The largest over the states of the input log-density, in the standardised units the
+        model works in (of the observed inputs of a row with missing ones; 0 for a row with
+        none). On the training recordings it tells what is usual: a ``min_log_density``
+        well below their smallest value holds only samples farther from every state than
+        any of them.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_features)
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row (read only for ``missing_values="carry_forward"``).
+        time : array-like of shape (n_samples,), default=None
+            Optional time stamps, checked to increase within every recording.
+
+        Returns
+        -------
+        log_density : ndarray of shape (n_samples,)
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from skhmmgmr import HMMGMRRegressor
+        >>> rng = np.random.default_rng(1)
+        >>> X = np.cumsum(rng.normal(size=(400, 2)), axis=0) / 10
+        >>> model = HMMGMRRegressor(n_states=2, random_state=0).fit(X, X.sum(axis=1))
+        >>> usual = model.input_log_density(X).min()
+        >>> held = model.set_params(min_log_density=usual - 20.0).filter_stream()
+        >>> held.update(np.array([50.0, -50.0]), return_flag=True)[1]
+        'outlier'
+        """
+        standardized, _, rows, missing = read_inputs(self, X, groups, time)
+        _, top, _ = scaled_input_densities(standardized, self.model_.gmr, missing=missing)
+        return rows.to_caller_order(top)
+
     def predict_state_proba(self, X, groups=None, time=None):
         """Filtered state probabilities ``alpha_t,k`` given the inputs up to each row.
 
@@ -417,8 +472,13 @@ class HMMGMRRegressor(
             Rows sum to one.
         """
         standardized, recordings, rows, missing = read_inputs(self, X, groups, time)
-        gmr = self.model_.gmr
-        alpha = filter_state_probabilities(standardized, recordings, gmr, missing=missing)
+        alpha = filter_state_probabilities(
+            standardized,
+            recordings,
+            self.model_.gmr,
+            missing=missing,
+            min_log_density=self.min_log_density,
+        )
         return rows.to_caller_order(alpha)
 
     def predict(self, X, groups=None, time=None, return_std=False):
@@ -443,14 +503,16 @@ class HMMGMRRegressor(
         """
         standardized, recordings, rows, missing = read_inputs(self, X, groups, time)
         model = self.model_
-        alpha = filter_state_probabilities(standardized, recordings, model.gmr, missing=missing)
-        estimate, std = gmr_estimates(standardized, alpha, model.gmr, return_std, missing=missing)
-        estimate = model.standardization.outputs(estimate)
-        estimate = smooth_outputs(estimate, recordings, model.output_decay)
+        estimate, std, _ = model.predict_outputs(
+            standardized,
+            recordings,
+            missing=missing,
+            min_log_density=self.min_log_density,
+            return_std=return_std,
+        )
         estimate = rows.to_caller_order(estimate[:, 0] if model.scalar_output else estimate)
         if not return_std:
             return estimate
-        std = model.standardization.output_std(std)
         return estimate, rows.to_caller_order(std[:, 0] if model.scalar_output else std)
 
     def transform(self, X, groups=None, time=None):

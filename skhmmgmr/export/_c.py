@@ -1,566 +1,44 @@
-"""C99 source of a fitted model's causal filter: ``<name>.h`` and ``<name>.c``.
+"""``write_c``: the causal filter of a fitted model as C99 source, ``<name>.h`` and ``<name>.c``.
 
-The generated code runs, sample by sample, what :class:`~skhmmgmr.FilterStream` runs
-(METHOD.md section 2), on parameters written into the source as ``static const`` arrays:
-
-1. the derived inputs of a torque pipeline (:class:`~skhmmgmr.SteeringFeatures`): the friction
-   input ``tanh(v / friction_velocity)`` of the velocity, low-pass filtered when the transformer
-   has ``velocity_filter`` (started at the recording's first finite velocity; a non-finite one
-   leaves the filter alone and the next is taken in over the whole time since the last, as
-   :func:`~skhmmgmr.torque_pipeline.low_pass`), and the signed powers ``sign(x) |x|^p``;
-2. the standardised inputs ``z`` (in double precision); a non-finite one holds the sample
-   (return 1), so do standardised inputs whose absolute values sum to 1e100 or more (return 2);
-3. the log input density of every state, ``norm_k - |z @ G_k + o_k|^2``, ``G_k`` upper
-   triangular (each row an axpy over the columns from its own on); with a shared covariance
-   ``z @ G`` is computed once. A sample whose log-densities are all below ``log(DBL_MIN)`` (or
-   whose sum is not finite) is an outlier: held (return 2);
-4. the normalised forward step with the restart rule: densities relative to the best state,
-   ``alpha ∝ prior * b``, from ``b`` alone when every product is zero, then
-   ``prior = A^T alpha`` for the next sample;
-5. the states' conditional output means and their mixture, and on request the predictive std
-   (law of total variance) at the last accepted sample, or the prior mixture before any;
-6. for a model whose read-out smooths, the first-order read-out of the mixture
-   (``output_decay``, :mod:`skhmmgmr._hmm._readout`), in double precision.
-
-A held sample leaves the filter state unchanged and returns the last estimate. The state is one
-struct the caller owns (no heap, no globals written), so several recordings can be filtered at
-once. ``dtype="float32"`` runs steps 3-5 in single precision (inputs, standardisation, derived
-inputs and the returned values stay in double).
+The model is read into flat arrays (:func:`~skhmmgmr.export._model.read_filter`), the header
+and the source written from them (:mod:`._c_header`, :mod:`._c_source`), then both files
+through the package's one rule for output files (:mod:`skhmmgmr._core._files`): checked before
+anything is written (a missing folder is created, an existing file is replaced only with
+``overwrite=True``), each written to an exclusively created temporary file renamed into place.
 """
 
-import os
-import textwrap
 from pathlib import Path
 
-import numpy as np
-
-from .._version import __version__
+from .._core._files import check_output_paths, write_atomically
+from ._c_header import header
+from ._c_source import source
 from ._model import check_dtype, check_name, read_filter
 
-_TYPES = {
-    "float64": {"real": "double", "suffix": "", "exp": "exp", "sqrt": "sqrt"},
-    "float32": {"real": "float", "suffix": "f", "exp": "expf", "sqrt": "sqrtf"},
-}
-_PER_LINE = 4
 
-
-def _number(value, suffix=""):
-    return repr(float(value)) + suffix
-
-
-def _array(name, ctype, values, suffix="", comment=None):
-    """A ``static const`` array definition holding ``values`` (flattened)."""
-    values = np.ravel(values)
-    if suffix:  # the single-precision value, written so that it reads back exactly
-        values = values.astype(np.float32)
-    numbers = [_number(v, suffix) for v in values]
-    lines = [", ".join(numbers[i : i + _PER_LINE]) for i in range(0, len(numbers), _PER_LINE)]
-    body = ",\n    ".join(lines)
-    head = f"/* {comment} */\n" if comment else ""
-    return f"{head}static const {ctype} {name}[{len(numbers)}] = {{\n    {body}\n}};\n"
-
-
-def _string(text):
-    """A C string literal of ``text`` (UTF-8; anything but plain characters as octal escapes)."""
-    plain = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789 _-.,:;()[]/+*=")
-    out = []
-    for byte in str(text).encode("utf-8"):
-        char = chr(byte)
-        out.append(char if char in plain else f"\\{byte:03o}")
-    return '"' + "".join(out) + '"'
-
-
-def _comment(text, first):
-    """``text`` wrapped into C comment lines, the first starting with ``first``; nothing in it
-    can end the comment."""
-    text = text.replace("*/", "* /").replace("/*", "/ *").replace("??", "? ?")
-    lines = textwrap.wrap(text, 96, initial_indent=first, subsequent_indent=" *   ")
-    return "\n".join(lines)[1:]  # the caller writes the first " "
-
-
-def _triangle(gating):
-    """The upper triangle of every state's rows, row by row (row ``i`` from column ``i``)."""
-    n_inputs = gating.shape[-1]
-    return np.concatenate([g[i, i:] for g in gating for i in range(n_inputs)])
-
-
-def header(spec, name, dtype):
-    """Text of ``<name>.h``."""
-    real = _TYPES[dtype]["real"]
-    upper = name.upper()
-    n_states, n_outputs = spec.n_states, spec.n_outputs
-    velocity = ""
-    if spec.derived.velocity_decay is not None:
-        velocity = (
-            "    double velocity;       /* low-pass filtered velocity (friction input) */\n"
-            "    double velocity_since; /* samples since its last finite value; 0: none yet */\n"
-        )
-    names = _comment(", ".join(spec.input_names), " * Inputs, in this order: ")
-    return f"""\
-/* {name}.h: causal HMM-GMR filter of a fitted skhmmgmr model (C99).
- *
- * Generated by skhmmgmr {__version__} (skhmmgmr.export.write_c); do not edit: export again.
- * {n_states} states, {spec.n_raw_inputs} input(s), {n_outputs} output(s), {real} arithmetic.
- {names}.
- *
- * Usage: one {name}_state per recording (caller-owned, no heap); {name}_reset at the start of
- * every recording, then {name}_update on every sample, in time order.
- */
-#ifndef {upper}_H
-#define {upper}_H
-
-#include <stddef.h>
-
-#ifdef __cplusplus
-extern "C" {{
-#endif
-
-#define {upper}_N_INPUTS {spec.n_raw_inputs}
-#define {upper}_N_OUTPUTS {n_outputs}
-
-/* Return codes of {name}_update. */
-#define {upper}_FILTERED 0   /* the sample was filtered (also after a restart)             */
-#define {upper}_NON_FINITE 1 /* an input is NaN or infinite: estimate held                  */
-#define {upper}_OUTLIER 2    /* the inputs are too far from every state: estimate held      */
-
-/* The filter state of one recording: treat as opaque. */
-typedef struct {{
-    {real} alpha[{n_states}];    /* filtered state probabilities, last accepted sample */
-    {real} prior[{n_states}];    /* predicted state probabilities of the next sample */
-    {real} means[{n_states * n_outputs}];    /* states' output means, last accepted sample */
-    double estimate[{n_outputs}];  /* last estimate */
-    int started;           /* whether a sample was accepted since the reset */
-{velocity}}} {name}_state;
-
-int         {name}_n_inputs(void);       /* raw inputs, in the fitted input order   */
-int         {name}_n_outputs(void);
-const char *{name}_input_name(int i);   /* NULL outside [0, n_inputs)              */
-size_t      {name}_state_size(void);     /* bytes of one filter state              */
-void        {name}_reset({name}_state *state);     /* start of a recording         */
-
-/* Filter one sample: inputs[n_inputs] in, estimate[n_outputs] and std[n_outputs] (predictive
- * standard deviation; std may be NULL) out. Returns {upper}_FILTERED (0), {upper}_NON_FINITE (1)
- * or {upper}_OUTLIER (2); a held sample (1 or 2) leaves the state unchanged and gives the last
- * estimate (before any accepted sample: the prior mixture's mean and std). */
-int         {name}_update({name}_state *state, const double *inputs,
-                          double *estimate, double *std);
-
-#ifdef __cplusplus
-}}
-#endif
-
-#endif /* {upper}_H */
-"""
-
-
-def _parameters(spec, dtype):
-    """The ``static const`` arrays of ``<name>.c``."""
-    types = _TYPES[dtype]
-    real, suffix = types["real"], types["suffix"]
-    names = ",\n    ".join(_string(n) for n in spec.input_names)
-    parts = [f"static const char *const input_names[{spec.n_raw_inputs}] = {{\n    {names}\n}};\n"]
-    double = [
-        ("input_center", spec.input_center, None),
-        ("input_scale", spec.input_scale, None),
-        ("output_center", spec.output_center, None),
-        ("output_scale", spec.output_scale, None),
-        ("prior_estimate", spec.prior_estimate, "output mean and std before any sample"),
-        ("prior_std", spec.prior_std, None),
-    ]
-    parts += [_array(n, "double", v, comment=c) for n, v, c in double]
-    gating = spec.gating[:1] if spec.shared_gating else spec.gating
-    if spec.triangular:
-        gating_values, layout = _triangle(gating), "upper triangle, row by row"
-    else:
-        gating_values, layout = gating, "row by row"
-    own = [
-        ("startprob", spec.startprob, None),
-        ("transmat_t", spec.transmat.T, "row j: probabilities of entering state j from each"),
-        ("gating", gating_values, f"weights of z_i in the density terms ({layout})"),
-        ("offsets", spec.offsets, "constant of every density term"),
-        ("norms", spec.norms[:1] if spec.shared_gating else spec.norms, "log normalisers"),
-        ("coef", spec.coef[:1] if spec.shared_coef else spec.coef, "output means: coef z + b"),
-        ("intercept", spec.intercept, None),
-        ("conditional_variances", spec.conditional_variances, None),
-    ]
-    parts += [_array(n, real, v, suffix, c) for n, v, c in own]
-    if spec.smoothed:
-        decay = spec.output_decay
-        parts.append(_array("output_decay", "double", decay, comment="first-order read-out"))
-        parts.append(_array("output_gain", "double", 1.0 - decay))
-    derived = spec.derived
-    if derived.friction is not None:
-        parts.append(f"static const double friction_velocity = {_number(derived.friction[1])};\n")
-    if derived.velocity_decay is not None:
-        decay = derived.velocity_decay
-        parts.append(f"static const double velocity_decay = {_number(decay)};\n")
-        parts.append(f"static const double velocity_gain = {_number(1.0 - decay)};\n")
-    return "\n".join(parts)
-
-
-def _derived_code(spec):
-    """Statements writing the derived inputs into ``x[n_raw:]`` (and the velocity filter)."""
-    derived, n_raw = spec.derived, spec.n_raw_inputs
-    lines = []
-    column = n_raw
-    if derived.friction is not None:
-        position = derived.friction[0]
-        if derived.velocity_decay is None:
-            lines.append(f"    x[{column}] = tanh(inputs[{position}] / friction_velocity);")
-        else:
-            lines.append(
-                f"    x[{column}] = tanh(low_pass(state, inputs[{position}]) / friction_velocity);"
-            )
-        column += 1
-    for position, power in derived.powers:
-        magnitude = (
-            f"fabs(inputs[{position}]) * fabs(inputs[{position}])"
-            if power == 2
-            else f"pow(fabs(inputs[{position}]), {power}.0)"
-        )
-        lines.append(f"    x[{column}] = signum(inputs[{position}]) * ({magnitude});")
-        column += 1
-    return "\n".join(lines)
-
-
-_LOW_PASS = """
-/* The velocity through the first-order low-pass filter of SteeringFeatures (low_pass): the
- * first finite value is taken as it is, the next after g non-finite ones over g + 1 periods. */
-static double low_pass(NAME_state *state, double velocity)
-{
-    double lapse;
-    if (!isfinite(velocity)) {
-        if (state->velocity_since > 0.0) {
-            state->velocity_since += 1.0;
-        }
-        return velocity;
-    }
-    if (state->velocity_since == 0.0) {
-        state->velocity = velocity_gain * velocity + velocity_decay * velocity;
-    } else if (state->velocity_since == 1.0) {
-        state->velocity = velocity_gain * velocity + velocity_decay * state->velocity;
-    } else {
-        lapse = pow(velocity_decay, state->velocity_since);
-        state->velocity = velocity_gain * velocity
-                          + (lapse * state->velocity + (velocity_decay - lapse) * velocity);
-    }
-    state->velocity_since = 1.0;
-    return state->velocity;
-}
-"""
-
-_SIGNUM = """
-static double signum(double value)
-{
-    return (double)((value > 0.0) - (value < 0.0));
-}
-"""
-
-
-def _density_code(spec, real):
-    """Body of ``log_densities``: ``log_prob[k]`` for every state."""
-    n_states, n_inputs = spec.n_states, spec.n_inputs
-    start = "i" if spec.triangular else "0"
-    width = f"{n_inputs} - i" if spec.triangular else f"{n_inputs}"
-    whiten = f"""\
-        for (i = 0; i < {n_inputs}; ++i) {{
-            const {real} zi = z[i];
-            for (j = {start}; j < {n_inputs}; ++j) {{
-                terms[j] += zi * weights[j - {start}];
-            }}
-            weights += {width};
-        }}"""
-    if spec.shared_gating:
-        return f"""\
-    {real} whitened[{n_inputs}];
-    const {real} *weights = gating;
-    int i, j, k;
-    for (j = 0; j < {n_inputs}; ++j) {{
-        whitened[j] = 0;
-    }}
-    {{
-        {real} *terms = whitened;
-{whiten}
-    }}
-    for (k = 0; k < {n_states}; ++k) {{
-        {real} total = norms[0];
-        for (j = 0; j < {n_inputs}; ++j) {{
-            const {real} term = whitened[j] + offsets[k * {n_inputs} + j];
-            total -= term * term;
-        }}
-        log_prob[k] = total;
-    }}"""
-    return f"""\
-    {real} terms[{n_inputs}];
-    const {real} *weights = gating;
-    int i, j, k;
-    for (k = 0; k < {n_states}; ++k) {{
-        {real} total = norms[k];
-        for (j = 0; j < {n_inputs}; ++j) {{
-            terms[j] = offsets[k * {n_inputs} + j];
-        }}
-{whiten}
-        for (j = 0; j < {n_inputs}; ++j) {{
-            total -= terms[j] * terms[j];
-        }}
-        log_prob[k] = total;
-    }}"""
-
-
-def _means_code(spec, real):
-    """Body of ``output_means``: ``means[k * n_outputs + o]`` for every state."""
-    n_states, n_outputs, n_inputs = spec.n_states, spec.n_outputs, spec.n_inputs
-    if spec.shared_coef:
-        return f"""\
-    int i, k, o;
-    for (o = 0; o < {n_outputs}; ++o) {{
-        {real} slope = 0;
-        for (i = 0; i < {n_inputs}; ++i) {{
-            slope += coef[o * {n_inputs} + i] * z[i];
-        }}
-        for (k = 0; k < {n_states}; ++k) {{
-            means[k * {n_outputs} + o] = slope + intercept[k * {n_outputs} + o];
-        }}
-    }}"""
-    return f"""\
-    int i, k;
-    for (k = 0; k < {n_states * n_outputs}; ++k) {{
-        {real} mean = intercept[k];
-        for (i = 0; i < {n_inputs}; ++i) {{
-            mean += coef[k * {n_inputs} + i] * z[i];
-        }}
-        means[k] = mean;
-    }}"""
-
-
-def source(spec, name, dtype):
-    """Text of ``<name>.c``."""
-    types = _TYPES[dtype]
-    real, exp, sqrt = types["real"], types["exp"], types["sqrt"]
-    n_states, n_outputs, n_inputs, n_raw = (
-        spec.n_states,
-        spec.n_outputs,
-        spec.n_inputs,
-        spec.n_raw_inputs,
-    )
-    helpers = ""
-    if spec.derived.velocity_decay is not None:
-        helpers += _LOW_PASS.replace("NAME", name)
-    if spec.derived.powers:
-        helpers += _SIGNUM
-    velocity_reset = ""
-    if spec.derived.velocity_decay is not None:
-        velocity_reset = "    state->velocity = 0.0;\n    state->velocity_since = 0.0;\n"
-    if spec.derived.n_derived:
-        gather = f"""\
-    double x[{n_inputs}];
-    for (i = 0; i < {n_raw}; ++i) {{
-        x[i] = inputs[i];
-    }}
-{_derived_code(spec)}"""
-        source_of_z = "x"
-    else:
-        gather = ""
-        source_of_z = "inputs"
-    remember_started = ""
-    read_out = "        state->estimate[o] = (double)mixed * output_scale[o] + output_center[o];"
-    if spec.smoothed:  # the first-order read-out, from the GMR estimate of a recording's first
-        remember_started = "    const int started = state->started;\n"
-        read_out = """\
-        const double gmr = (double)mixed * output_scale[o] + output_center[o];
-        state->estimate[o] = started ? output_gain[o] * gmr + output_decay[o] * state->estimate[o]
-                                     : gmr;"""
-    return f"""\
-/* {name}.c: causal HMM-GMR filter of a fitted skhmmgmr model (C99), see {name}.h.
- *
- * Generated by skhmmgmr {__version__} (skhmmgmr.export.write_c); do not edit: export again.
- * The model's parameters are in the standardised units the model works in.
- */
-#include <math.h>
-#include <stddef.h>
-
-#include "{name}.h"
-
-/* Below this log input density in every state a sample is an outlier: log(DBL_MIN). */
-static const {real} min_log_density = {_number(spec.min_log_density, types["suffix"])};
-/* Standardised inputs whose absolute values sum to this or more are outliers. */
-static const double max_standardised = 1e100;
-
-{_parameters(spec, dtype)}{helpers}
-int {name}_n_inputs(void)
-{{
-    return {n_raw};
-}}
-
-int {name}_n_outputs(void)
-{{
-    return {n_outputs};
-}}
-
-const char *{name}_input_name(int i)
-{{
-    return (i >= 0 && i < {n_raw}) ? input_names[i] : NULL;
-}}
-
-size_t {name}_state_size(void)
-{{
-    return sizeof({name}_state);
-}}
-
-void {name}_reset({name}_state *state)
-{{
-    int k;
-    for (k = 0; k < {n_states}; ++k) {{
-        state->alpha[k] = startprob[k];
-        state->prior[k] = startprob[k];
-    }}
-    for (k = 0; k < {n_states * n_outputs}; ++k) {{
-        state->means[k] = 0;
-    }}
-    for (k = 0; k < {n_outputs}; ++k) {{
-        state->estimate[k] = prior_estimate[k];
-    }}
-    state->started = 0;
-{velocity_reset}}}
-
-/* Log input density of every state at the standardised inputs z. */
-static void log_densities(const {real} *z, {real} *log_prob)
-{{
-{_density_code(spec, real)}
-}}
-
-/* Every state's conditional output means (standardised), means[k * n_outputs + o]. */
-static void output_means(const {real} *z, {real} *means)
-{{
-{_means_code(spec, real)}
-}}
-
-/* Predictive std at the last accepted sample (law of total variance), or the prior's. */
-static void write_std(const {name}_state *state, double *std)
-{{
-    int k, o;
-    if (!state->started) {{
-        for (o = 0; o < {n_outputs}; ++o) {{
-            std[o] = prior_std[o];
-        }}
-        return;
-    }}
-    for (o = 0; o < {n_outputs}; ++o) {{
-        {real} mean = 0, within = 0, between = 0;
-        for (k = 0; k < {n_states}; ++k) {{
-            mean += state->alpha[k] * state->means[k * {n_outputs} + o];
-        }}
-        for (k = 0; k < {n_states}; ++k) {{
-            const {real} spread = state->means[k * {n_outputs} + o] - mean;
-            within += state->alpha[k] * conditional_variances[k * {n_outputs} + o];
-            between += state->alpha[k] * (spread * spread);
-        }}
-        std[o] = (double){sqrt}(within + between) * output_scale[o];
-    }}
-}}
-
-static int held(const {name}_state *state, int code, double *estimate, double *std)
-{{
-    int o;
-    for (o = 0; o < {n_outputs}; ++o) {{
-        estimate[o] = state->estimate[o];
-    }}
-    if (std != NULL) {{
-        write_std(state, std);
-    }}
-    return code;
-}}
-
-int {name}_update({name}_state *state, const double *inputs, double *estimate, double *std)
-{{
-    {real} z[{n_inputs}], log_prob[{n_states}], frames[{n_states}], alpha[{n_states}];
-    {real} top, inverse, total = 0;
-    double magnitude = 0.0, log_sum = 0.0;
-    int i, k, o;
-{gather}
-    for (i = 0; i < {n_inputs}; ++i) {{
-        const double value = ({source_of_z}[i] - input_center[i]) / input_scale[i];
-        if (!isfinite(value)) {{
-            return held(state, {name.upper()}_NON_FINITE, estimate, std);
-        }}
-        magnitude += fabs(value);
-        z[i] = ({real})value;
-    }}
-    if (!(magnitude < max_standardised)) {{
-        return held(state, {name.upper()}_OUTLIER, estimate, std);
-    }}
-    log_densities(z, log_prob);
-    top = log_prob[0];
-    for (k = 0; k < {n_states}; ++k) {{
-        top = log_prob[k] > top ? log_prob[k] : top;
-        log_sum += log_prob[k];
-    }}
-    if (!(top >= min_log_density && isfinite(log_sum))) {{
-        return held(state, {name.upper()}_OUTLIER, estimate, std);
-    }}
-    /* densities relative to the best state (exactly 1 there) times the predicted probabilities */
-    for (k = 0; k < {n_states}; ++k) {{
-        frames[k] = {exp}(log_prob[k] - top);
-        alpha[k] = state->prior[k] * frames[k];
-        total += alpha[k];
-    }}
-    if (!(total > 0)) {{
-        /* no state the transitions allow explains the sample: restart from its densities */
-        total = 0;
-        for (k = 0; k < {n_states}; ++k) {{
-            alpha[k] = frames[k];
-            total += alpha[k];
-        }}
-    }}
-    inverse = 1 / total;
-    for (k = 0; k < {n_states}; ++k) {{
-        state->alpha[k] = alpha[k] * inverse;
-    }}
-    for (k = 0; k < {n_states}; ++k) {{
-        {real} next = 0;
-        for (i = 0; i < {n_states}; ++i) {{
-            next += transmat_t[k * {n_states} + i] * state->alpha[i];
-        }}
-        state->prior[k] = next;
-    }}
-    output_means(z, state->means);
-{remember_started}    state->started = 1;
-    for (o = 0; o < {n_outputs}; ++o) {{
-        {real} mixed = 0;
-        for (k = 0; k < {n_states}; ++k) {{
-            mixed += state->alpha[k] * state->means[k * {n_outputs} + o];
-        }}
-{read_out}
-        estimate[o] = state->estimate[o];
-    }}
-    if (std != NULL) {{
-        write_std(state, std);
-    }}
-    return {name.upper()}_FILTERED;
-}}
-"""
-
-
-def write_c(fitted, directory, *, name="skhmmgmr_model", dtype="float64"):
+def write_c(fitted, directory, *, name="skhmmgmr_model", dtype="float64", overwrite=False):
     """Write the causal filter of a fitted model as C99 source: ``<name>.h`` and ``<name>.c``.
 
-    The generated filter gives, sample by sample, the estimates of
-    :class:`~skhmmgmr.FilterStream` (and of ``predict`` on samples that are not held): the
-    same normalised forward recursion, restart rule, held samples and predictive standard
-    deviation. It needs only the C standard library and ``math.h``, allocates nothing, and
-    builds with ``cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic``. Its C API::
+    The generated filter gives, sample by sample, the estimates of ``predict`` and of
+    :class:`~skhmmgmr.FilterStream`: the same normalised forward recursion in log space,
+    restart rule, predictive standard deviation and outlier policy (the regressor's
+    ``min_log_density``: by default no sample is held for its distance to the states). It
+    needs only the C standard library and ``math.h``, allocates nothing, and builds with
+    ``cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic`` (``dtype="float32"`` also with
+    ``-Wdouble-promotion``). Its C API, ``real`` being ``double`` or ``float``
+    (``<name>_real``)::
 
         int         <name>_n_inputs(void);     /* raw inputs, in the fitted input order */
         int         <name>_n_outputs(void);
         const char *<name>_input_name(int i);
         size_t      <name>_state_size(void);   /* bytes of one filter state */
         void        <name>_reset(<name>_state *state);   /* start of a recording */
-        int         <name>_update(<name>_state *state, const double *inputs,
-                                  double *estimate, double *std);
+        int         <name>_update(<name>_state *state, const real *inputs,
+                                  real *estimate, real *std);
 
     ``<name>_update`` returns 0 when the sample was filtered, 1 when an input is not finite
-    and 2 for an outlier (the two held cases of :class:`~skhmmgmr.FilterStream`: the estimate
-    is the last one and the state is unchanged); ``std`` may be ``NULL``.
+    and 2 when it is out of the model's range or below ``min_log_density`` (the two held
+    cases of :class:`~skhmmgmr.FilterStream`: the estimate is the last one and the state is
+    unchanged); ``std`` may be ``NULL``.
 
     Parameters
     ----------
@@ -570,13 +48,19 @@ def write_c(fitted, directory, *, name="skhmmgmr_model", dtype="float64"):
         the raw inputs and computes the derived ones itself, velocity filter included
         (reset with the recording).
     directory : str or path-like
-        An existing folder; the two files are written (replaced) there.
+        The folder of the two files, created when missing.
     name : str, default="skhmmgmr_model"
-        C identifier prefixing the files, the functions and the state type.
+        C identifier prefixing the files, the functions and the state type; not the name of
+        a C standard header (``math``, ``stddef``..., in any case), which the generated file
+        would hide.
     dtype : {"float64", "float32"}, default="float64"
-        Arithmetic of the filter: "float32" runs the densities, the recursion and the
-        read-out in single precision (for microcontrollers with a single-precision unit);
-        the inputs and estimates stay ``double`` in the API.
+        Arithmetic of the filter: "float32" runs everything in single precision, the
+        derived inputs, the read-out and the API's inputs and estimates included (``float``
+        literals, ``expf``, ``tanhf``, ``powf``), for microcontrollers whose floating-point
+        unit is single precision: no double-precision operation is left.
+    overwrite : bool, default=False
+        Whether existing files are replaced; without it they are refused before anything
+        is written.
 
     Returns
     -------
@@ -588,7 +72,10 @@ def write_c(fitted, directory, *, name="skhmmgmr_model", dtype="float64"):
     ValueError
         For a model fitted with ``missing_values`` other than "error" (the C filter holds a
         sample with a NaN input instead of marginalising it), a pipeline with other steps,
-        a ``name`` that is not a C identifier, an unknown ``dtype``.
+        a ``name`` that is not a C identifier or names a standard header, an unknown
+        ``dtype``, a parameter that single precision cannot hold (``dtype="float32"``).
+    FileExistsError
+        For an existing file and ``overwrite=False``.
     sklearn.exceptions.NotFittedError
         For an unfitted model.
 
@@ -612,18 +99,13 @@ def write_c(fitted, directory, *, name="skhmmgmr_model", dtype="float64"):
     ['steering.h', 'steering.c']
     """
     name, dtype = check_name(name), check_dtype(dtype)
+    if not isinstance(overwrite, bool):
+        raise TypeError(f"overwrite must be True or False, got {overwrite!r}")
     directory = Path(directory)
-    if not directory.is_dir():
-        raise ValueError(f"directory {str(directory)!r} is not an existing folder.")
-    spec = read_filter(fitted)
     paths = (directory / f"{name}.h", directory / f"{name}.c")
+    check_output_paths(paths, overwrite=overwrite, option="directory")
+    spec = read_filter(fitted)
     texts = (header(spec, name, dtype), source(spec, name, dtype))
     for path, text in zip(paths, texts, strict=True):
-        # written beside the target and renamed when complete: never a half-written file
-        partial = path.with_name(f".{path.name}.partial")
-        try:
-            partial.write_text(text)
-            os.replace(partial, path)
-        finally:
-            partial.unlink(missing_ok=True)
+        write_atomically(path, text)
     return paths

@@ -30,6 +30,7 @@ from sklearn.exceptions import NotFittedError
 from sklearn.pipeline import Pipeline
 from sklearn.utils.validation import check_is_fitted
 
+from .._hmm._holds import check_min_log_density
 from ..estimator import HMMGMRRegressor
 from ..torque_pipeline import SteeringFeatures
 
@@ -72,7 +73,7 @@ class ExportedFilter:
     coef: np.ndarray
     intercept: np.ndarray
     conditional_variances: np.ndarray
-    min_log_density: float
+    min_log_density: object  # the outlier policy's threshold, None: none (_hmm._holds)
     output_decay: np.ndarray  # the first-order read-out (skhmmgmr._hmm._readout)
 
     @property
@@ -244,7 +245,9 @@ def read_filter(fitted):
         coef=np.array(params.coef),
         intercept=np.array(params.intercept),
         conditional_variances=np.array(params.conditional_variances),
-        min_log_density=math.log(np.finfo(float).tiny),
+        min_log_density=check_min_log_density(
+            getattr(regressor, "min_log_density", None), type(regressor).__name__
+        ),
         output_decay=np.array(model.output_decay),
     )
     for field in ("gating", "offsets", "norms", "coef", "intercept", "conditional_variances"):
@@ -253,8 +256,19 @@ def read_filter(fitted):
     return exported
 
 
+# The headers of the C standard library (C99, C11, C23): a generated ``<name>.h`` of one of
+# these names, in a folder on the include path, would hide it (also on a file system that
+# ignores case).
+STANDARD_HEADERS = frozenset(
+    "assert complex ctype errno fenv float inttypes iso646 limits locale math setjmp signal "  # noqa: SIM905
+    "stdalign stdarg stdatomic stdbit stdbool stdckdint stddef stdint stdio stdlib "
+    "stdnoreturn string tgmath threads time uchar wchar wctype".split()
+)
+
+
 def check_name(name):
-    """``name`` if it is a C identifier that may prefix the generated names, else ValueError."""
+    """``name`` if it is a C identifier that may prefix the generated names and name the
+    files, else ValueError."""
     if (
         not isinstance(name, str)
         or not name
@@ -263,7 +277,13 @@ def check_name(name):
     ):
         raise ValueError(
             f"name must be a C identifier (ASCII letters, digits and underscores, starting "
-            f"with a letter), got {name!r}."
+            f"with a letter), got {name!r:.100}."
+        )
+    if name.lower() in STANDARD_HEADERS:
+        raise ValueError(
+            f"name={name!r} would write {name}.h, which hides the C standard header "
+            f"<{name.lower()}.h> wherever the folder is on the include path; choose another "
+            "name."
         )
     return name
 

@@ -29,6 +29,7 @@ import numbers
 import numpy as np
 import pandas as pd
 
+from .._core._compat import FiniteInterval, validate_parameter_constraints, validate_params
 from .._core._panel import read_layout
 from .._core._schema import MANOEUVRE, RECORDING, TARGET, TIME
 
@@ -46,12 +47,20 @@ _COLUMNS = ("lateral_deviation_0m", "heading_deviation_0m", "steering_wheel_angl
 DEFAULT_LANE_WIDTH = 3.5
 
 
-def _positive(value, name):
-    if not isinstance(value, numbers.Real) or isinstance(value, bool) or not value > 0:
-        raise ValueError(f"{name} must be a positive number, got {name}={value!r}.")
-    return float(value)
+# A width, a distance or an angle: positive and finite.
+POSITIVE = [FiniteInterval(numbers.Real, 0, None, closed="neither")]
 
 
+@validate_params(
+    {
+        "frame": [pd.DataFrame],
+        "lane_width": [*POSITIVE, None],
+        "vehicle_width": POSITIVE,
+        "hysteresis": POSITIVE,
+        "reversal_gap": POSITIVE,
+    },
+    prefer_skip_nested_validation=True,
+)
 def lane_keeping_metrics(
     frame,
     *,
@@ -98,14 +107,15 @@ def lane_keeping_metrics(
     >>> bool(metrics["lateral_deviation_max"] < 1.75)
     True
     """
-    if not isinstance(frame, pd.DataFrame):
-        raise TypeError(f"frame must be a pandas DataFrame, got {type(frame).__name__}.")
     if lane_width is None:
         lane_width = frame.attrs.get("lane_width", DEFAULT_LANE_WIDTH)
-    lane_width = _positive(lane_width, "lane_width")
-    vehicle_width = _positive(vehicle_width, "vehicle_width")
-    reversal_gap = _positive(reversal_gap, "reversal_gap")
-    hysteresis = _positive(hysteresis, "hysteresis")
+        validate_parameter_constraints(
+            {"lane_width": POSITIVE},
+            {"lane_width": lane_width},
+            caller_name="lane_keeping_metrics (read from frame.attrs)",
+        )
+    lane_width, vehicle_width = float(lane_width), float(vehicle_width)
+    reversal_gap, hysteresis = float(reversal_gap), float(hysteresis)
     if vehicle_width >= lane_width:
         raise ValueError(
             f"vehicle_width={vehicle_width} must be smaller than lane_width={lane_width}."

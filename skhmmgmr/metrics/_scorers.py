@@ -6,18 +6,29 @@ import warnings
 import numpy as np
 from sklearn.utils.metadata_routing import UNCHANGED, MetadataRequest, get_routing_for_object
 
-from .._core._compat import _MetadataRequester, _routing_enabled
+from .._core._compat import (
+    _MetadataRequester,
+    _routing_enabled,
+    validate_parameter_constraints,
+    validate_params,
+)
 from .._core._docstrings import fill_shared_parameters
 from .._core._panel import read_layout, recordings_of
 from .._core._pickled import PickleVersionMixin
-from .._core._validation import check_sampling_period
 from ._table import (
+    PREDICT_MODE,
+    SAMPLING_PERIOD,
+    SCALE,
+    TRADE_OFFS,
+    WEIGHT,
     average,
-    check_weights,
+    check_some_weight,
     parse_trade_offs,
     performance_per_recording,
     recording_metrics,
 )
+
+TIME_COLUMN = [str, None]
 
 
 class UngroupedScoringWarning(UserWarning):
@@ -27,11 +38,13 @@ class UngroupedScoringWarning(UserWarning):
 class _RecordingScorer(PickleVersionMixin, _MetadataRequester):
     """Base of the per-recording scorers: prediction per recording and metadata routing.
 
-    Subclasses define ``_score_predictions(y_true, y_pred, groups, sampling_period, time)``.
+    Subclasses define ``_score_predictions(y_true, y_pred, groups, sampling_period, time)``
+    and add the constraints of their own parameters to ``_parameter_constraints``.
     """
 
     _sign = 1
     _needs_sampling = True
+    _parameter_constraints: dict = {"predict_mode": PREDICT_MODE}
 
     # -- scikit-learn parameter protocol (so that clone, repr and set_params work) ------------
     @classmethod
@@ -114,14 +127,11 @@ class _RecordingScorer(PickleVersionMixin, _MetadataRequester):
 
     # -- scoring ------------------------------------------------------------------------------
     def _check_params(self):
+        validate_parameter_constraints(
+            self._parameter_constraints, self.get_params(), caller_name=type(self).__name__
+        )
         if self.sampling_period is not None and self.time_column is not None:
             raise ValueError("give either sampling_period or time_column, not both")
-        check_sampling_period(self.sampling_period)
-        if self.predict_mode not in ("auto", "groups", "per_recording"):
-            raise ValueError(
-                "predict_mode must be 'auto', 'groups' or 'per_recording', "
-                f"got {self.predict_mode!r}"
-            )
 
     def __call__(self, estimator, X, y_true, groups=None, **kwargs):
         """Score a fitted estimator on ``X`` (greater is better).
@@ -311,6 +321,15 @@ class PerformanceScore(_RecordingScorer):
     """
 
     _sign = -1
+    _parameter_constraints = {
+        **_RecordingScorer._parameter_constraints,
+        "accuracy_weight": WEIGHT,
+        "smoothness_weight": WEIGHT,
+        "sampling_period": SAMPLING_PERIOD,
+        "time_column": TIME_COLUMN,
+        "accuracy_scale": SCALE,
+        "smoothness_scale": SCALE,
+    }
 
     def __init__(
         self,
@@ -338,7 +357,7 @@ class PerformanceScore(_RecordingScorer):
 
     def _check_params(self):
         super()._check_params()
-        check_weights(self.accuracy_weight, self.smoothness_weight)
+        check_some_weight(self.accuracy_weight, self.smoothness_weight)
 
     def _score_predictions(self, y_true, y_pred, groups, sampling_period, time):
         metrics = recording_metrics(
@@ -410,6 +429,11 @@ class SmoothnessScore(_RecordingScorer):
     """
 
     _sign = -1
+    _parameter_constraints = {
+        **_RecordingScorer._parameter_constraints,
+        "sampling_period": SAMPLING_PERIOD,
+        "time_column": TIME_COLUMN,
+    }
 
     def __init__(self, *, sampling_period=None, time_column=None, predict_mode="auto"):
         self.sampling_period = sampling_period
@@ -424,6 +448,18 @@ class SmoothnessScore(_RecordingScorer):
         return average(metrics.smoothness, "uniform_average")
 
 
+@validate_params(
+    {
+        "trade_offs": TRADE_OFFS,
+        "sampling_period": SAMPLING_PERIOD,
+        "time_column": TIME_COLUMN,
+        "accuracy_scale": SCALE,
+        "smoothness_scale": SCALE,
+        "metrics": ["boolean"],
+        "predict_mode": PREDICT_MODE,
+    },
+    prefer_skip_nested_validation=True,
+)
 @fill_shared_parameters
 def make_performance_scorers(
     trade_offs=("100/0", "50/50", "0/100"),

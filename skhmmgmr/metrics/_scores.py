@@ -23,26 +23,52 @@ scikit-learn's convention that greater is better: :class:`PerformanceScore` retu
 :class:`SmoothnessScore` returns ``-SM``, like ``neg_mean_squared_error``.
 """
 
-import numbers
+from numbers import Integral
 
 import numpy as np
 import pandas as pd
 
+from .._core._compat import Interval, validate_params
 from .._core._docstrings import fill_shared_parameters
 from ._table import (
+    MULTIOUTPUT,
+    SAMPLING_PERIOD,
+    SCALE,
+    TRADE_OFFS,
+    WEIGHT,
     average,
-    check_weights,
+    check_some_weight,
     parse_trade_offs,
     performance_per_recording,
     recording_metrics,
     share_of_sum,
 )
 
+# The arrays of a metric function: the target and estimate, the recordings and the time.
+_ARRAYS = {
+    "y_true": ["array-like"],
+    "y_pred": ["array-like"],
+    "groups": ["array-like", None],
+    "time": ["array-like", None],
+}
+
+
+def arrays(*names):
+    """The constraints of the arrays ``names`` of a metric function."""
+    return {name: _ARRAYS[name] for name in names}
+
+
+COLUMNS = {"model": [str], "recording": [str, list, tuple]}
+
 # --------------------------------------------------------------------------------------------
 # Metric functions
 # --------------------------------------------------------------------------------------------
 
 
+@validate_params(
+    arrays("y_true", "y_pred", "groups") | {"multioutput": MULTIOUTPUT},
+    prefer_skip_nested_validation=True,
+)
 @fill_shared_parameters
 def accuracy_score(y_true, y_pred, *, groups=None, multioutput="uniform_average"):
     """Accuracy ``(1 - RMSE / SD(T)) * 100`` per recording, averaged over recordings.
@@ -75,6 +101,11 @@ def accuracy_score(y_true, y_pred, *, groups=None, multioutput="uniform_average"
     return average(metrics.accuracy, multioutput)
 
 
+@validate_params(
+    arrays("y_pred", "time", "groups")
+    | {"sampling_period": SAMPLING_PERIOD, "multioutput": MULTIOUTPUT},
+    prefer_skip_nested_validation=True,
+)
 @fill_shared_parameters
 def smoothness_score(
     y_pred, *, sampling_period=None, time=None, groups=None, multioutput="uniform_average"
@@ -115,6 +146,18 @@ def smoothness_score(
     return average(metrics.smoothness, multioutput)
 
 
+@validate_params(
+    arrays("y_true", "y_pred", "time", "groups")
+    | {
+        "accuracy_weight": WEIGHT,
+        "smoothness_weight": WEIGHT,
+        "sampling_period": SAMPLING_PERIOD,
+        "accuracy_scale": SCALE,
+        "smoothness_scale": SCALE,
+        "multioutput": MULTIOUTPUT,
+    },
+    prefer_skip_nested_validation=True,
+)
 @fill_shared_parameters
 def performance_score(
     y_true,
@@ -164,7 +207,7 @@ def performance_score(
     >>> performance_score(y_true, y_pred, accuracy_weight=1.0, smoothness_weight=0.0)
     70.71...
     """
-    check_weights(accuracy_weight, smoothness_weight)
+    check_some_weight(accuracy_weight, smoothness_weight)
     metrics = recording_metrics(
         y_true,
         y_pred,
@@ -180,6 +223,10 @@ def performance_score(
     return average(per_recording, multioutput)
 
 
+@validate_params(
+    arrays("y_true", "y_pred", "groups", "time") | {"sampling_period": SAMPLING_PERIOD},
+    prefer_skip_nested_validation=True,
+)
 @fill_shared_parameters
 def evaluate_recordings(y_true, y_pred, *, groups=None, sampling_period=None, time=None):
     """Table of the metrics of every recording.
@@ -232,6 +279,10 @@ def evaluate_recordings(y_true, y_pred, *, groups=None, sampling_period=None, ti
 # --------------------------------------------------------------------------------------------
 
 
+@validate_params(
+    {"step": [Interval(Integral, 1, 100, closed="both")]},
+    prefer_skip_nested_validation=True,
+)
 def trade_offs(step=10):
     """Accuracy/smoothness trade-offs from "100/0" to "0/100" in steps of ``step`` percent.
 
@@ -250,11 +301,21 @@ def trade_offs(step=10):
     >>> trade_offs(25)
     ['100/0', '75/25', '50/50', '25/75', '0/100']
     """
-    if not isinstance(step, numbers.Integral) or not 0 < step <= 100 or 100 % step:
-        raise ValueError(f"step must be an integer in 1..100 that divides 100, got {step!r}")
+    if 100 % step:
+        raise ValueError(f"step must be a step in percent that divides 100, got {step!r}")
     return [f"{a}/{100 - a}" for a in range(100, -1, -int(step))]
 
 
+@validate_params(
+    {
+        "table": [pd.DataFrame],
+        "weights": TRADE_OFFS,
+        "accuracy": [str],
+        "smoothness": [str],
+    }
+    | COLUMNS,
+    prefer_skip_nested_validation=True,
+)
 def normalize_performance(
     table,
     *,
@@ -358,6 +419,11 @@ def normalize_performance(
     return pd.concat(frames, ignore_index=True)
 
 
+@validate_params(
+    {"scores": [pd.DataFrame], "average": ["boolean"], "score": [str], "trade_off": [str]}
+    | COLUMNS,
+    prefer_skip_nested_validation=True,
+)
 def rank_models(
     scores,
     *,

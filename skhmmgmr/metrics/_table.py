@@ -1,14 +1,26 @@
 """Private helpers of :mod:`skhmmgmr.metrics`: input checks and the per-recording metric table."""
 
 import numbers
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 from sklearn.utils.validation import check_array
 
+from .._core._compat import FiniteInterval, StrOptions
 from .._core._panel import recordings_of
 from .._core._validation import binary_unit, check_sampling_period, constant_to_round_off
+
+# Constraints of the parameters the metric functions, the scorers and the searches share
+# (scikit-learn's validate_params and _parameter_constraints).
+WEIGHT = [FiniteInterval(numbers.Real, 0, None, closed="left")]
+SAMPLING_PERIOD = [FiniteInterval(numbers.Real, 0, None, closed="neither"), None]
+SCALE = [FiniteInterval(numbers.Real, 0, None, closed="neither"), Mapping, pd.Series, None]
+MULTIOUTPUT = [StrOptions({"raw_values", "uniform_average"}), "array-like"]
+PREDICT_MODE = [StrOptions({"auto", "groups", "per_recording"})]
+# One trade-off ("70/30" or a pair of weights) or a list of them.
+TRADE_OFFS = [str, list, tuple]
 
 
 def check_named_lengths(**arrays):
@@ -246,18 +258,8 @@ def share_of_sum(values, keys):
     return shares.fillna(0.0)
 
 
-def check_weights(accuracy_weight, smoothness_weight):
-    for name, weight in (
-        ("accuracy_weight", accuracy_weight),
-        ("smoothness_weight", smoothness_weight),
-    ):
-        if (
-            isinstance(weight, bool | np.bool_)
-            or not isinstance(weight, numbers.Real)
-            or not weight >= 0
-            or not np.isfinite(weight)
-        ):
-            raise ValueError(f"{name} must be a finite non-negative number, got {weight!r}")
+def check_some_weight(accuracy_weight, smoothness_weight):
+    """Refuse a trade-off whose two weights (each checked against :data:`WEIGHT`) are 0."""
     if accuracy_weight == 0 and smoothness_weight == 0:
         raise ValueError("accuracy_weight and smoothness_weight are both 0; give one a weight")
 

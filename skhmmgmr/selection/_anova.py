@@ -9,12 +9,10 @@
   smoothness across every trade-off.
 """
 
-import numbers
-
 import pandas as pd
 
-from .._search._score_tables import labels_of, one_way_anova
 from ..metrics._table import parse_trade_offs
+from ._search._score_tables import labels_of, one_way_anova
 
 # "100/0 to 40/60": the trade-offs giving accuracy at least this share of the weight
 LOWEST_ACCURACY_SHARE = 0.4
@@ -35,11 +33,9 @@ def accuracy_led(labels, lowest=LOWEST_ACCURACY_SHARE):
     ]
 
 
-def check_anova_scope(anova_trade_offs, anova_n_strategies, labels):
-    """Validate the ANOVA parameters of :func:`~skhmmgmr.select_parameters`.
-
-    Returns the trade-offs compared (a subset of the mapped ``labels``).
-    """
+def check_anova_scope(anova_trade_offs, labels):
+    """The trade-offs the ANOVAs of :func:`~skhmmgmr.select_parameters` compare, checked to
+    be among the mapped ``labels``."""
     if anova_trade_offs is None:
         chosen = accuracy_led(labels)
     else:
@@ -50,9 +46,6 @@ def check_anova_scope(anova_trade_offs, anova_n_strategies, labels):
                 f"anova_trade_offs {missing} are not among the mapped trade-offs {labels}; "
                 "add them to relevance_trade_offs"
             )
-    n = anova_n_strategies
-    if n is not None and (not isinstance(n, numbers.Integral) or isinstance(n, bool) or n < 2):
-        raise ValueError(f"anova_n_strategies must be an integer >= 2 or None, got {n!r}")
     return chosen
 
 

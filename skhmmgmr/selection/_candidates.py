@@ -3,27 +3,40 @@
 Re-exported by :mod:`skhmmgmr.selection`, where they are documented.
 """
 
-import numbers
 import warnings
 from collections import Counter
 from collections.abc import Mapping
+from numbers import Real
 
 import numpy as np
 import pandas as pd
 
+from .._core._compat import HasMethods, Interval, StrOptions, validate_params
 from .._core._docstrings import fill_shared_parameters
-from .._search._evaluation import check_recording_splits, evaluate_models
-from .._search._score_tables import best_per_recording, labels_of, rescore_table
-from .._search.base import default_estimator, input_feature_names
 from ..metrics._scores import trade_offs as all_trade_offs
+from ..metrics._table import TRADE_OFFS
+from ._search._evaluation import check_recording_splits, evaluate_models
+from ._search._score_tables import best_per_recording, labels_of, rescore_table
+from ._search.base import default_estimator, input_feature_names, search_constraints
 
 # Share of the recordings a feature must reach; Liberal: counted at least once.
 STRATEGIES = {"Strict": 0.66, "Mild": 0.33, "Liberal": None}
-# Name of the candidates built from all sources together.
+SHARE = [Interval(Real, 0, 1, closed="right")]
+# Name of the candidates built from all sources together, and the rules that form them.
 COMBINED = "combined"
-COMBINED_RULES = ("union", "sum")
+COMBINED_RULE = [StrOptions({"union", "sum"})]
+# One trade-off: "50/50" or a pair of weights.
+TRADE_OFF = [str, tuple]
 
 
+@validate_params(
+    {
+        "results": [HasMethods(["best_subsets"]), pd.DataFrame],
+        "trade_offs": [*TRADE_OFFS, None],
+        "features": ["array-like", None],
+    },
+    prefer_skip_nested_validation=True,
+)
 def feature_relevance(results, trade_offs=None, *, features=None):
     """Count every feature in the per-recording best subsets, for every trade-off.
 
@@ -86,16 +99,16 @@ def feature_relevance(results, trade_offs=None, *, features=None):
     return counts
 
 
-def _check_share(name, value):
-    if not isinstance(value, numbers.Real) or isinstance(value, bool) or not 0 < value <= 1:
-        raise ValueError(f"{name} must be a share of the recordings in (0, 1], got {value!r}")
-
-
-def check_combined_rule(combined_rule):
-    if combined_rule not in COMBINED_RULES:
-        raise ValueError(f"combined_rule must be one of {COMBINED_RULES}, got {combined_rule!r}")
-
-
+@validate_params(
+    {
+        "relevance": [Mapping],
+        "trade_off": TRADE_OFF,
+        "strict": SHARE,
+        "mild": SHARE,
+        "combined_rule": COMBINED_RULE,
+    },
+    prefer_skip_nested_validation=True,
+)
 def candidate_subsets(
     relevance, trade_off="50/50", *, strict=0.66, mild=0.33, combined_rule="union"
 ):
@@ -140,10 +153,7 @@ def candidate_subsets(
     >>> candidates.set_index("name").loc[["Strict 1", "Strict 2", "Strict 3"], "features"].tolist()
     [('swa',), ('e_psi30',), ('swa', 'e_psi30')]
     """
-    _check_share("strict", strict)
-    _check_share("mild", mild)
-    check_combined_rule(combined_rule)
-    if not isinstance(relevance, Mapping) or not relevance:
+    if not relevance:
         raise ValueError("relevance must be a non-empty mapping source name -> relevance table")
     label = labels_of(trade_off)[0]
     features = list(dict.fromkeys(f for table in relevance.values() for f in table.index))
@@ -183,6 +193,17 @@ def candidate_subsets(
     return pd.DataFrame(rows)
 
 
+@validate_params(
+    {
+        "X": [pd.DataFrame],
+        "y": ["array-like"],
+        "groups": ["array-like"],
+        "subsets": [Mapping],
+        "trade_off": TRADE_OFF,
+    }
+    | search_constraints("cv", "estimator", "sampling_period", "n_jobs", "memory", "verbose"),
+    prefer_skip_nested_validation=False,  # the estimator's own parameters are checked in fit
+)
 @fill_shared_parameters
 def compare_subsets(
     X,

@@ -10,7 +10,7 @@
 4. candidate subsets Strict / Mild / Liberal from the exhaustive (1) and forward (2) counts,
    and their unions (3) (:func:`candidate_subsets`), compared with K=2 on the validation
    recordings (:func:`compare_subsets`); the lowest mean performance score wins;
-5. state selection for that subset (:class:`~skhmmgmr.state_selection.StateSelector`);
+5. state selection for that subset (:class:`~skhmmgmr.StateSelector`);
 6. the final model and the all-feature baseline (same K) on the test recordings.
 
 One-way ANOVAs (:func:`one_way_anova`) check whether the metric differences across trade-offs
@@ -19,8 +19,9 @@ and strategies are significant, in the scope of Appendix E.1.2-E.1.4 (see
 """
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from numbers import Real
+from numbers import Integral, Real
 
 import numpy as np
 import pandas as pd
@@ -28,24 +29,21 @@ from sklearn.base import clone
 from sklearn.model_selection import PredefinedSplit
 from threadpoolctl import threadpool_limits
 
+from .._core._compat import FiniteInterval, Interval, validate_params
 from .._core._docstrings import fill_shared_parameters
 from .._core._pickled import PickleVersionMixin
 from .._core._schema import TARGET
-from .._search._evaluation import shared_evaluations
-from .._search._score_tables import labels_of
-from .._search.base import default_estimator
-from ..feature_selection._spearman import SpearmanSelector
 from ..metrics._scores import evaluate_recordings, normalize_performance
 from ..metrics._scores import trade_offs as all_trade_offs
-from ..state_selection import StateSelector
+from ..metrics._table import TRADE_OFFS
 from ._anova import N_STRATEGIES, check_anova_scope, framework_anova
-from ._candidates import (
-    COMBINED,
-    candidate_subsets,
-    check_combined_rule,
-    compare_subsets,
-)
+from ._candidates import COMBINED, COMBINED_RULE, TRADE_OFF, candidate_subsets, compare_subsets
 from ._framework_data import sampling_period_of, split_recordings_table
+from ._search._evaluation import shared_evaluations
+from ._search._score_tables import labels_of
+from ._search.base import default_estimator, search_constraints
+from ._selectors._spearman import SpearmanSelector
+from ._selectors._states import K_RANGE, TOL, StateSelector
 from ._sources import (
     check_sources,
     fit_source,
@@ -171,12 +169,29 @@ def _fit_on(estimator, X, y, groups, rows, features, n_states):
         return model.fit(X.loc[rows, list(features)].to_numpy(), y[rows], groups=groups[rows])
 
 
-def _check_screening_tol(value):
-    if isinstance(value, bool) or not isinstance(value, Real) or not value > 0 or value == np.inf:
-        raise ValueError(f"screening_tol must be a positive finite number or None, got {value!r}")
-    return float(value)
-
-
+@validate_params(
+    {
+        "data": [pd.DataFrame, tuple],
+        "split": ["array-like", dict, None],
+        "candidate_features": ["array-like", None],
+        "target": [str],
+        "n_top": [Interval(Integral, 1, None, closed="left")],
+        "max_subset_size": [Interval(Integral, 1, None, closed="left"), None],
+        "k_max": K_RANGE["k_max"],
+        "trade_off": TRADE_OFF,
+        "relevance_trade_offs": [*TRADE_OFFS, None],
+        "combined_rule": COMBINED_RULE,
+        "relevance_sources": [Mapping, None],
+        "anova_trade_offs": [*TRADE_OFFS, None],
+        "anova_n_strategies": [Interval(Integral, 2, None, closed="left"), None],
+        "tol": TOL,
+        "screening_tol": [FiniteInterval(Real, 0, None, closed="neither"), None],
+        "progress": ["boolean"],
+        "random_state": ["random_state"],
+    }
+    | search_constraints("sampling_period", "estimator", "n_jobs", "memory"),
+    prefer_skip_nested_validation=False,  # the estimator's own parameters are checked in fit
+)
 @fill_shared_parameters
 def select_parameters(
     data,
@@ -286,12 +301,11 @@ def select_parameters(
     label = labels_of(trade_off)[0]
     if label not in labels:
         labels = [*labels, label]
-    anova_labels = check_anova_scope(anova_trade_offs, anova_n_strategies, labels)
-    check_combined_rule(combined_rule)
+    anova_labels = check_anova_scope(anova_trade_offs, labels)
     if relevance_sources is None:
         screening = estimator
         if screening_tol is not None:
-            screening = clone(estimator).set_params(tol=_check_screening_tol(screening_tol))
+            screening = clone(estimator).set_params(tol=float(screening_tol))
         relevance_sources = thesis_sources(screening, max_subset_size=max_subset_size, tol=tol)
     sources = check_sources(relevance_sources)
     w1, w2 = (float(w) / 100 for w in label.split("/"))

@@ -4,7 +4,6 @@ import numpy as np
 import pandas as pd
 
 from .._core._schema import FEATURE_NAMES, RECORDING, SPLIT, TIME
-from .._core._validation import check_sampling_period
 
 
 def split_recordings_table(data, split, candidate_features, target):
@@ -44,7 +43,7 @@ def split_recordings_table(data, split, candidate_features, target):
 def sampling_period_of(data, sampling_period):
     """The given sampling period, else the median time step of the ``time`` column."""
     if sampling_period is not None:
-        return check_sampling_period(sampling_period)
+        return float(sampling_period)
     if isinstance(data, pd.DataFrame) and TIME in data.columns:
         steps = data.groupby(RECORDING, sort=False)[TIME].diff().dropna()
         return float(steps.median())

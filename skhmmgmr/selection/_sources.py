@@ -6,17 +6,26 @@ mapping of names to sources; these are the rules it fits and reads them by.
 """
 
 import inspect
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import pandas as pd
 from sklearn.base import clone
 
-from .._core._compat import _routing_enabled
-from ..feature_selection._wrappers import ExhaustiveFeatureSelector, ForwardFeatureSelector
+from .._core._compat import (
+    HasMethods,
+    StrOptions,
+    _routing_enabled,
+    validate_parameter_constraints,
+)
 from ._candidates import feature_relevance
+from ._selectors._exhaustive import ExhaustiveFeatureSelector
+from ._selectors._forward import ForwardFeatureSelector
 
 FEATURE_SCOPES = ("all", "top")
+SOURCE_CONSTRAINTS = {
+    "selector": [HasMethods(["fit"])],
+    "features": [StrOptions(set(FEATURE_SCOPES))],
+}
 
 
 @dataclass(frozen=True)
@@ -46,10 +55,10 @@ class RelevanceSource:
     features: str = "all"
 
     def __post_init__(self):
-        if self.features not in FEATURE_SCOPES:
-            raise ValueError(f"features must be one of {FEATURE_SCOPES}, got {self.features!r}")
-        if not hasattr(self.selector, "fit"):
-            raise TypeError(f"a relevance source needs a selector with fit, got {self.selector!r}")
+        parameters = {"selector": self.selector, "features": self.features}
+        validate_parameter_constraints(
+            SOURCE_CONSTRAINTS, parameters, caller_name="RelevanceSource"
+        )
 
 
 def thesis_sources(estimator, *, max_subset_size=None, tol=0.01):
@@ -65,8 +74,9 @@ def thesis_sources(estimator, *, max_subset_size=None, tol=0.01):
 
 
 def check_sources(sources):
-    """The sources as ``{name: RelevanceSource}`` (a bare selector sees every feature)."""
-    if not isinstance(sources, Mapping) or not sources:
+    """The sources of a mapping as ``{name: RelevanceSource}`` (a bare selector sees every
+    feature)."""
+    if not sources:
         raise ValueError("relevance_sources must be a non-empty mapping name -> selector")
     checked = {}
     for name, source in sources.items():

@@ -1,12 +1,12 @@
 """``FilterStream``: the causal GMR filter one sample at a time, for a control loop."""
 
-from ._filter import (
+from ._filter import FilterStream
+from ._flags import (
     FLAG_MISSING,
     FLAG_NON_FINITE,
     FLAG_OK,
     FLAG_OUTLIER,
     FLAG_RESTARTED,
-    FilterStream,
 )
 
 __all__ = [

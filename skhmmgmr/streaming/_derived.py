@@ -94,7 +94,11 @@ class DerivedInputs:
             x = values[position]
             size = abs(x)
             for power in powers:
-                values.append(size**power if x >= 0.0 else -(size**power))
+                try:
+                    value = size**power
+                except OverflowError:  # the batch transform's inf, held as non-finite
+                    value = math.inf
+                values.append(value if x >= 0.0 else -value)
 
     def low_pass(self, velocity):
         """The filtered velocity of the next row (NaN for a missing one)."""

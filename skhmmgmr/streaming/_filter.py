@@ -2,15 +2,12 @@
 
 The stream runs the same normalised forward recursion and Gaussian Mixture Regression as
 :meth:`HMMGMRRegressor.predict <skhmmgmr.HMMGMRRegressor.predict>` (METHOD.md section 2), one
-sample at a time, with the filter state carried between calls. Everything that does not depend
-on the sample is precomputed at construction and every intermediate result lives in a
-preallocated buffer, so that an update is a handful of small NumPy calls on fixed buffers:
-
-- the standardised input ``z`` (with a trailing 1) times ONE stacked matrix gives at once the
-  terms of the gating density's quadratic form of every state
-  (:class:`~skhmmgmr._hmm._emissions.GaussianDensity`) and every per-state conditional mean;
-- the squared terms times a block-indicator matrix (with the log-normalisers as its last row)
-  give the log-densities of all states in one more product.
+sample at a time, with the filter state carried between calls, and holds the samples the
+outlier policy holds (:mod:`skhmmgmr._hmm._holds`, the one ``predict`` and the generated C
+follow). Everything that does not depend on the sample is precomputed at construction and
+every intermediate result lives in a preallocated buffer, so that an update is a handful of
+small NumPy calls on fixed buffers: ``[z, 1]`` times one stacked matrix, then the squared
+terms times a block-sum matrix (:mod:`skhmmgmr.streaming._products`).
 
 The stream reads a :class:`~skhmmgmr.FittedHMMGMR` (an estimator's ``model_``): the gating
 density, the regressions and the standardisation are that object's. A sample with missing
@@ -23,36 +20,37 @@ derived inputs are computed first, one scalar operation at a time, into a preall
 """
 
 import math
-import numbers
 
 import numpy as np
-from sklearn.utils.validation import check_is_fitted
 
-from .._core._panel import align_target, read_layout, recordings_of
 from .._core._pickled import PickleVersionMixin
-from .._hmm._fitted import FittedHMMGMR
-from .._hmm._missing import gmr_given_observed
-from .._hmm._stale_inputs import MISSING_VALUES, carried_inputs
+from .._hmm._holds import MAX_STANDARDISED
+from .._hmm._stale_inputs import carried_inputs
 from ._adaptation import OnlineMeans, check_adaptation
-from ._derived import check_final, read_pipeline
-from ._inputs import as_batch, as_row
-
-FLAG_OK = "ok"
-FLAG_NON_FINITE = "non-finite"
-FLAG_OUTLIER = "outlier"
-FLAG_RESTARTED = "restarted"
-FLAG_MISSING = "missing"
-_HELD_FLAGS = (FLAG_NON_FINITE, FLAG_OUTLIER)
-_LEARNED_FLAGS = (FLAG_OK, FLAG_RESTARTED)
-_MAX_STANDARDISED = 1e100
+from ._batch import read_batch
+from ._flags import (
+    FLAG_MISSING,
+    FLAG_NON_FINITE,
+    FLAG_OK,
+    FLAG_OUTLIER,
+    FLAG_RESTARTED,
+    HELD_FLAGS,
+    LEARNED_FLAGS,
+)
+from ._inputs import as_row
+from ._missing import observed_frames
+from ._products import product_buffer, stacked_weights
+from ._source import read_streamed
+from ._targets import read_target, read_targets
 
 
 class FilterStream(PickleVersionMixin):
     """Causal HMM-GMR filter of a fitted :class:`~skhmmgmr.HMMGMRRegressor`, one sample a call.
 
     Streaming a recording sample by sample gives the estimates of ``model.predict`` on the whole
-    recording (up to round-off), as long as no sample is held (see Notes). The stream copies
-    the model's parameters when it is created: refitting the model later does not change it.
+    recording (up to round-off), held samples included: both follow one outlier policy (see
+    Notes). The stream copies the model's parameters when it is created: refitting the model
+    later does not change it.
 
     Parameters
     ----------
@@ -62,10 +60,13 @@ class FilterStream(PickleVersionMixin):
         (:func:`~skhmmgmr.make_torque_pipeline`'s, or any scikit-learn ``Pipeline`` of those
         steps), which then takes the sensed rows (see Notes). Usually created with
         ``estimator.filter_stream()`` or ``pipeline.filter_stream()``.
-    min_log_density : float, default=log(smallest normal double) ~ -708.4
-        A sample whose input log-density, in the standardised units the model works in, is below
-        this value in every state is an outlier (see Notes). The default flags exactly the
-        samples whose densities all underflow to zero in double precision.
+    min_log_density : float, default=None
+        The outlier policy's threshold (see Notes): a sample whose input log-density, in the
+        standardised units the model works in, is below it in every state is held. ``None``:
+        the estimator's ``min_log_density`` when ``model`` is an estimator (the regressor's,
+        for a Pipeline), which ``predict`` and the generated C follow too; no sample is held
+        by its density for a :class:`~skhmmgmr.FittedHMMGMR`. Give another value only to try
+        one out: ``predict`` keeps the estimator's.
     missing_values : {"error", "marginalize", "carry_forward"}, default=None
         What a NaN input means. "error": the sample is held (flag ``"non-finite"``).
         "marginalize": the input is missing; the sample is filtered on its observed inputs,
@@ -104,21 +105,23 @@ class FilterStream(PickleVersionMixin):
 
     Notes
     -----
-    Samples the filter cannot use are *held*: the update returns the last accepted estimate (or,
+    The forward step works in log space (the densities relative to the best state's), so that a
+    sample far from every state is filtered as ``predict`` filters it. Samples the filter
+    cannot or should not use are *held*: the update returns the last accepted estimate (or,
     before any accepted sample, the prior-mixture estimate ``sum_k pi_k mu_k^T`` and its
     standard deviation), sets :attr:`held_`, and leaves the filter state unchanged, so the
     estimates that follow equal those of a stream that never saw the held sample. Two kinds
-    of sample are held:
+    of sample are held (the outlier policy of :mod:`skhmmgmr._hmm._holds`):
 
-    - ``"non-finite"``: an infinite input, or a NaN one unless missing values are
-      missing values (``missing_values="marginalize"`` or ``"carry_forward"``: the sample is
-      then filtered on its observed inputs, and a sample with none passes the state
-      probabilities through the transition matrix);
-    - ``"outlier"``: finite inputs so far from every state that all input log-densities are below
-      ``min_log_density`` (or standardised inputs whose absolute values sum above 1e100, where
-      the densities would overflow). ``predict`` would extrapolate the nearest state's linear
-      regression there; the stream does not trust it, keeps the state probabilities, and flags
-      the sample.
+    - ``"non-finite"``: an infinite input (a derived input that overflows, as the cube of a
+      load of 1e200, included), or a NaN one unless missing values are missing values
+      (``missing_values="marginalize"`` or ``"carry_forward"``: the sample is then filtered
+      on its observed inputs, and a sample with none passes the state probabilities through
+      the transition matrix). ``predict`` refuses such a sample, naming it;
+    - ``"outlier"``: finite inputs out of the model's range (standardised inputs whose
+      absolute values sum to 1e100 or more, where the squares of the density terms would
+      overflow), which ``predict`` refuses too; and, only when ``min_log_density`` is set,
+      a sample whose input log-densities are all below it, which ``predict`` holds too.
 
     No NaN or infinity ever comes out of :meth:`update`.
 
@@ -169,49 +172,32 @@ class FilterStream(PickleVersionMixin):
         self,
         model,
         *,
-        min_log_density=math.log(np.finfo(float).tiny),
+        min_log_density=None,
         missing_values=None,
         relevance=None,
         forgetting=1.0,
     ):
-        estimator = None if isinstance(model, FittedHMMGMR) else model
-        self._stages = ()
-        if estimator is not None and hasattr(estimator, "steps"):  # a Pipeline
-            self._stages, (name, estimator) = read_pipeline(estimator)
-        if estimator is not None:  # a fitted estimator first, as its other methods check
-            check_is_fitted(estimator)
-            model = getattr(estimator, "model_", None)
-            if not isinstance(model, FittedHMMGMR):
-                raise TypeError(
-                    "FilterStream streams a fitted HMMGMRRegressor, a FittedHMMGMR or a fitted "
-                    f"Pipeline ending in an HMMGMRRegressor; got {type(estimator).__name__}"
-                    + (f" (the Pipeline's step {name!r})" if self._stages else "")
-                )
-        if missing_values is None:
-            missing_values = getattr(estimator, "missing_values", "error")
-        if missing_values not in MISSING_VALUES:
-            raise ValueError(
-                f"missing_values must be one of {MISSING_VALUES}, got {missing_values!r}"
-            )
-        self.missing_values = missing_values
-        self._marginalize = missing_values != "error"
+        streamed = read_streamed(
+            model, missing_values=missing_values, min_log_density=min_log_density
+        )
+        model, self._stages = streamed.model, streamed.stages
+        self.min_log_density = streamed.min_log_density
+        # the outlier policy's threshold: -inf holds no sample by its density
+        self._threshold = -math.inf if self.min_log_density is None else self.min_log_density
+        self.missing_values = streamed.missing_values
+        self._marginalize = self.missing_values != "error"
         self.relevance, self.forgetting = check_adaptation(relevance, forgetting)
         self._model = model
-        self._carried = carried_inputs(model, missing_values)
+        self._carried = carried_inputs(model, self.missing_values)
         params, scaling = model.gmr, model.standardization
         n_states, n_outputs, n_inputs = params.coef.shape
-        self.n_features_in_ = n_inputs
-        names = model.feature_names
+        self.n_features_in_, names = streamed.n_features, streamed.names
         if self._stages:
-            check_final(self._stages, n_inputs, names)
-            first = self._stages[0]
-            self.n_features_in_, names = first.n_features_in, first.feature_names_in
             # the sensed row followed by every step's derived inputs, as the regressor reads it
             self._derived_row = np.empty(n_inputs)
         self._row_shape = (self.n_features_in_,)
         if names is not None:
             self.feature_names_in_ = np.asarray(names, dtype=object)
-        self.min_log_density = float(min_log_density)
         self._n_states, self._n_outputs = n_states, n_outputs
         self._scalar_output = model.scalar_output
         self._input_center = np.array(scaling.input_center)
@@ -230,24 +216,11 @@ class FilterStream(PickleVersionMixin):
         # Samples with missing inputs: the read-out conditioned on their observed inputs.
         self._gmr, self._added = params, None
 
-        # [z, 1] @ weights = [the gating density's quadratic-form terms of every state,
-        # m_k(z) for every k]; log b_k(z) = norm_k - (sum of the squares of state k's terms).
-        density = params.gating.density()
-        n_terms = density.factors.shape[0]
-        weights = np.empty((n_inputs + 1, n_terms + n_states * n_outputs))
-        weights[:, :n_terms] = density.factors.T
-        weights[:n_inputs, n_terms:] = np.hstack(list(params.coef.transpose(0, 2, 1)))
-        weights[n_inputs, n_terms:] = params.intercept.ravel()
+        weights, self._block_sum, n_whitened = stacked_weights(params)
         self._weights = weights
-        # [squared terms, 1] @ block_sum = log-densities.
-        block_sum = np.zeros((n_terms + 1, n_states))
-        block_sum[:n_terms] = -np.kron(np.eye(n_states), np.ones((n_terms // n_states, 1)))
-        block_sum[n_terms] = density.norms[:, 0]
-        self._block_sum = block_sum
-        n_whitened = n_terms
         self._online = None
         if relevance is not None:  # rewrites the constant row of the weights in place
-            self._online = OnlineMeans(model, weights[n_inputs], n_terms, relevance, forgetting)
+            self._online = OnlineMeans(model, weights[n_inputs], n_whitened, relevance, forgetting)
 
         self._z = np.ones(n_inputs + 1)
         self._z_inputs = self._z[:n_inputs]
@@ -272,9 +245,8 @@ class FilterStream(PickleVersionMixin):
             self._prior_estimate, self._prior_std = mean, std
 
     def _product_buffer(self, width, n_whitened, product=None):
-        product = np.empty(width) if product is None else product
-        means = product[n_whitened:].reshape(self._n_states, self._n_outputs)
-        return product, product[:n_whitened], means[:, 0] if self._scalar_output else means
+        shape = (self._n_states, self._n_outputs, self._scalar_output)
+        return product_buffer(width, n_whitened, *shape, product)
 
     def __setstate__(self, state):
         """Unpickle, then link the buffer views again (pickling copies every view)."""
@@ -287,6 +259,8 @@ class FilterStream(PickleVersionMixin):
         self.__dict__.setdefault("_smoothed", False)
         self.__dict__.setdefault("_decay", np.zeros(self._output_center.shape[0]))
         self.__dict__.setdefault("_decay_0", 0.0)
+        # a stream pickled before the outlier policy kept its own threshold
+        self.__dict__.setdefault("_threshold", self.min_log_density)
         self._z_inputs, self._squares_head = self._z[:n_inputs], self._squares[:n_whitened]
         width = self._weights.shape[1]
         self._work = self._product_buffer(width, n_whitened, self._work[0])
@@ -350,7 +324,7 @@ class FilterStream(PickleVersionMixin):
     @property
     def held_(self):
         """Whether the last update was held (non-finite or outlier sample)."""
-        return self.last_flag_ in _HELD_FLAGS
+        return self.last_flag_ in HELD_FLAGS
 
     def update(self, features, return_std=False, return_flag=False, *, target=None):
         """Filter one sample and return the estimate of the outputs.
@@ -375,12 +349,17 @@ class FilterStream(PickleVersionMixin):
         std : float or ndarray, only when ``return_std`` is True
         flag : str, only when ``return_flag`` is True
         """
-        if type(features) is np.ndarray and features.shape == self._row_shape:
+        if (
+            type(features) is np.ndarray
+            and features.shape == self._row_shape
+            and features.dtype.kind == "f"
+        ):
             row = features
         else:
             row = as_row(features, getattr(self, "feature_names_in_", None), self.n_features_in_)
-        if target is not None:
-            target = self._read_target(target)  # checked before the sample is consumed
+        if target is not None:  # checked before the sample is consumed
+            self._check_learns()
+            target = read_target(target, self._n_outputs, self._scalar_output)
         if self._stages:
             row = self._derive(row)
         np.subtract(row, self._input_center, out=self._z_inputs)
@@ -413,14 +392,17 @@ class FilterStream(PickleVersionMixin):
         z_list = self._z_inputs.tolist()
         product, whitened, means = self._work
         # NaN and infinity propagate into the sum; huge inputs would overflow the squares.
-        if sum(map(abs, z_list)) < _MAX_STANDARDISED:
+        if sum(map(abs, z_list)) < MAX_STANDARDISED:
             np.dot(self._z, self._weights, out=product)
             np.multiply(whitened, whitened, out=self._squares_head)
             log_prob = self._log_prob
             np.dot(self._squares, self._block_sum, out=log_prob)
             log_prob_list = log_prob.tolist()
             top = max(log_prob_list)
-            if not (top >= self.min_log_density and math.isfinite(sum(log_prob_list))):
+            # below the threshold, or out of range: no finite density (or a NaN one)
+            if not (
+                top >= self._threshold and top > -math.inf and not math.isnan(sum(log_prob_list))
+            ):
                 return self._hold(FLAG_OUTLIER)
             # Densities relative to the best state, as predict does: the largest is exactly 1.
             np.subtract(log_prob, top, out=log_prob)
@@ -462,73 +444,25 @@ class FilterStream(PickleVersionMixin):
         if self._online is None:
             raise ValueError("a target is learned only by a stream with relevance set")
 
-    def _read_target(self, target):
-        """The measured outputs of one sample as a float (one output) or an array of shape
-        (n_outputs,); ValueError naming ``target`` for anything else."""
-        self._check_learns()
-        if (
-            self._scalar_output
-            and isinstance(target, numbers.Real)
-            and not isinstance(target, (bool, np.bool_))
-        ):
-            return float(target)
-        try:
-            values = np.asarray(target, dtype=float)
-        except (TypeError, ValueError):
-            values = None
-        if (
-            values is None
-            or values.ndim > 1
-            or values.size != self._n_outputs
-            or (isinstance(target, (bool, np.bool_)))
-        ):
-            raise ValueError(
-                f"target must be the {self._n_outputs} measured output(s) of the sample "
-                f"(NaN if unknown), got {target!r:.100}"
-            )
-        return float(values[0]) if self._scalar_output else values.reshape(self._n_outputs)
-
-    def _read_targets(self, y, n_samples):
-        """The measured outputs of a batch, shape (n_samples,) or (n_samples, n_outputs);
-        ValueError naming ``y`` for anything else."""
-        self._check_learns()
-        try:
-            values = np.asarray(y, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"y must hold numbers (NaN if unknown): {exc}") from None
-        expected = (n_samples,) if self._scalar_output else (n_samples, self._n_outputs)
-        if self._scalar_output and values.shape == (n_samples, 1):
-            values = values[:, 0]
-        if values.shape != expected:
-            raise ValueError(
-                f"y has shape {values.shape}; the batch of {n_samples} rows of a model with "
-                f"{self._n_outputs} output(s) needs shape {expected}"
-            )
-        return values
-
     def _learn(self, target):
         """Learn the measured outputs of the last sample (see the Notes)."""
-        if self.last_flag_ in _LEARNED_FLAGS:
+        if self.last_flag_ in LEARNED_FLAGS:
             self._online.learn_target(self._alpha, self._z_inputs, target)
 
     def _missing_frames(self, means):
         """Scaled input densities of a sample whose NaN inputs are missing, given its observed
-        inputs (None for an outlier); writes the state output means given them into ``means``
+        inputs (None when held); writes the state output means given them into ``means``
         and the variances they add to the conditional ones into ``self._added``."""
-        missing = np.isnan(self._z_inputs)
-        z = np.where(missing, 0.0, self._z_inputs)[np.newaxis]
-        if not np.sum(np.abs(z)) < _MAX_STANDARDISED:
-            return None
         params = self._gmr if self._online is None else self._online.gmr()
-        stale = None if self._carried is None else self._carried.read(missing, self.n_samples_)
-        log_prob, state_means, added = gmr_given_observed(params, z, missing[np.newaxis], stale)
-        log_prob = log_prob[0]
-        top = log_prob.max()
-        if not (missing.all() or top >= self.min_log_density and np.isfinite(log_prob).all()):
+        stale = None
+        if self._carried is not None:
+            stale = self._carried.read(np.isnan(self._z_inputs), self.n_samples_)
+        observed = observed_frames(params, self._z_inputs, self._threshold, stale)
+        if observed is None:
             return None
-        means[:] = state_means[0, :, 0] if self._scalar_output else state_means[0]
-        self._added = added[0]
-        return np.exp(log_prob - top)
+        frames, state_means, self._added = observed
+        means[:] = state_means[:, 0] if self._scalar_output else state_means
+        return frames
 
     def _hold(self, flag):
         self.last_flag_ = flag
@@ -579,15 +513,18 @@ class FilterStream(PickleVersionMixin):
         std : ndarray of the same shape, only when ``return_std`` is True
         flags : ndarray of str of shape (n_samples,), only when ``return_flag`` is True
         """
-        rows = read_layout(X)
-        y = align_target(X, y, rows)
-        names = getattr(self, "feature_names_in_", None)
-        X = as_batch(rows.to_filter_order(X), names, self.n_features_in_)
         if y is not None:
-            y = self._read_targets(rows.to_filter_order(y), X.shape[0])
-        for stage in self._stages:  # a time level at another period than the filter's
-            stage.check_time(rows.time, rows.groups)
-        restarts = self._recording_starts(rows.groups, X.shape[0])
+            self._check_learns()
+        batch = read_batch(
+            X,
+            y,
+            names=getattr(self, "feature_names_in_", None),
+            n_features=self.n_features_in_,
+            stages=self._stages,
+            current=self.recording_,
+            read_targets=lambda y, n: read_targets(y, n, self._n_outputs, self._scalar_output),
+        )
+        X, y, restarts = batch.X, batch.y, batch.restarts
         shape = (X.shape[0],) if self._scalar_output else (X.shape[0], self._n_outputs)
         estimates = np.empty(shape)
         std = np.empty(shape) if return_std else None
@@ -607,17 +544,6 @@ class FilterStream(PickleVersionMixin):
                 std[i] = self._std()
             if return_flag:
                 flags[i] = self.last_flag_
-        result = tuple(rows.to_caller_order(a) for a in (estimates, std, flags) if a is not None)
+        result = (estimates, std, flags)
+        result = tuple(batch.rows.to_caller_order(a) for a in result if a is not None)
         return result if len(result) > 1 else result[0]
-
-    def _recording_starts(self, groups, n_samples):
-        """{row: recording id} of the rows where a recording of an indexed batch begins."""
-        if groups is None or n_samples == 0:
-            return {}
-        recordings = recordings_of(groups, n_samples)
-        starts = {
-            int(start): rec for rec, start in zip(recordings.ids, recordings.starts, strict=True)
-        }
-        if self.recording_ is not None and recordings.ids[0] == self.recording_:
-            del starts[0]  # the batch goes on with the recording of the previous batch
-        return starts

@@ -8,6 +8,7 @@ import numpy as np
 from ..._core._schema import FEATURE_NAMES
 from ._closed_loop import LOST_CONTROL
 from ._driver import DRIVER_STYLES
+from ._fmu_driver import FMUDriver, is_fmu
 from ._lane_keeping import human_run
 from ._model_driver import as_torque, torque_function
 from ._section import Section, SectionSpec
@@ -56,7 +57,13 @@ def drive(
         - another fitted scikit-learn regressor (anything with ``predict``): called on one row
           at a time, its inputs found by name likewise;
         - a callable ``driver(row) -> torque``, ``row`` an array of the 18 sensed features in
-          the order of :data:`FEATURE_NAMES` (read-only), called once per sample in time order.
+          the order of :data:`FEATURE_NAMES` (read-only), called once per sample in time order;
+        - a co-simulation FMU, FMI 2.0 or 3.0 (a path-like, or a string ending in ``.fmu``;
+          :func:`skhmmgmr.export.write_fmu` writes them), run through FMPy (the extra
+          ``skhmmgmr[fmu]``): its inputs found by name among the sensed features, one
+          communication step of ``1 / sampling_rate`` per sample (the FMU's default step size
+          must be that), its torque the output ``driver_torque`` (else its first real
+          output). Its drive is that of the model it was written from, to round-off.
 
         A pipeline whose velocity filter was made for another sampling period than
         ``1 / sampling_rate`` is refused, as its ``predict`` refuses such rows; a torque that is
@@ -131,14 +138,18 @@ def drive(
     True
     """
     spec = SectionSpec.of(locals(), "drive")
-    if isinstance(driver, str):
+    if isinstance(driver, str) and not is_fmu(driver):
         if driver not in DRIVER_STYLES:
             raise ValueError(
                 f"Unknown driver style driver={driver!r}; expected one of "
-                f"{sorted(DRIVER_STYLES)}, a fitted model or a callable."
+                f"{sorted(DRIVER_STYLES)}, a fitted model, an FMU (a .fmu path) or a callable."
             )
         return human_run(spec, driver, recording, split)
-    name, torque_of = torque_function(driver, spec.sampling_rate)
+    fmu = FMUDriver(driver, spec.sampling_rate) if is_fmu(driver) else None
+    if fmu is not None:
+        name, torque_of = fmu.name, fmu
+    else:
+        name, torque_of = torque_function(driver, spec.sampling_rate)
     section = Section(spec, _UNUSED_HUMAN)
     dt, scale = 1.0 / spec.sampling_rate, spec.sensor_scale
     errors = None if scale is None else draw_errors(section.n_samples, dt, scale, section.rng)
@@ -155,7 +166,11 @@ def drive(
             view.flags.writeable = True
         return as_torque(torque, f"The driver {name}", row / spec.sampling_rate)
 
-    log = section.simulate(torque_source)
+    try:
+        log = section.simulate(torque_source)
+    finally:
+        if fmu is not None:
+            fmu.close()
     n_driven = log.shape[0]
     # the torque sensor reads the log's torque: the driver's own with a rigid column, the
     # torsion bar's with a compliant one

@@ -29,7 +29,8 @@ def torque_function(driver, sampling_rate):
     if callable(driver):
         return getattr(driver, "__name__", type(driver).__name__), driver
     raise TypeError(
-        f"driver must be a style name, a fitted model or a callable; got {type(driver).__name__}."
+        "driver must be a style name, a fitted model, an FMU (a .fmu path) or a callable; "
+        f"got {type(driver).__name__}."
     )
 
 

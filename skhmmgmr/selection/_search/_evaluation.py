@@ -30,10 +30,10 @@ from sklearn.utils.validation import check_memory
 from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
-from .._core._validation import check_sampling_period
-from .._version import __version__
-from ..cluster._scatter import dask_client, scatter_once
-from ..metrics._scores import evaluate_recordings
+from ..._core._validation import check_sampling_period
+from ..._version import __version__
+from ...cluster._scatter import dask_client, scatter_once
+from ...metrics._scores import evaluate_recordings
 
 METRICS = ["rmse", "accuracy", "smoothness"]
 
@@ -110,6 +110,8 @@ def check_recording_splits(cv, X, y, groups):
     return splits
 
 
+# The package's folder (skhmmgmr/): the source of every module an evaluation runs.
+PACKAGE_FOLDER = Path(__file__).resolve().parents[2]
 # Libraries whose numerics an evaluation calls: their versions are part of the cache key.
 _NUMERIC_LIBRARIES = ("numpy", "scipy", "scikit-learn", "numba")
 
@@ -118,10 +120,9 @@ _NUMERIC_LIBRARIES = ("numpy", "scipy", "scikit-learn", "numba")
 def _installed_code():
     """SHA-256 of the package's Python source (an edited development install keeps its
     version number) and the versions of the numerical libraries, read once per process."""
-    root = Path(__file__).parent
     digest = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
-        digest.update(str(path.relative_to(root)).encode())
+    for path in sorted(PACKAGE_FOLDER.rglob("*.py")):
+        digest.update(str(path.relative_to(PACKAGE_FOLDER)).encode())
         digest.update(path.read_bytes())
     versions = {name: metadata.version(name) for name in _NUMERIC_LIBRARIES}
     return {"source": digest.hexdigest(), **versions}

@@ -13,14 +13,23 @@ from sklearn.base import BaseEstimator
 from sklearn.feature_selection import SelectorMixin
 from sklearn.utils.validation import check_is_fitted
 
-from .._core._compat import Interval, StrOptions, _fit_context
-from .._core._docstrings import fill_shared_parameters
-from .._core._panel import recordings_of
-from .._core._pickled import PickleVersionMixin
-from .._core._validation import check_dense, check_finite, check_target_finite
+from ..._core._compat import Interval, StrOptions, _fit_context, validate_params
+from ..._core._docstrings import fill_shared_parameters
+from ..._core._panel import recordings_of
+from ..._core._pickled import PickleVersionMixin
+from ..._core._validation import check_dense, check_finite, check_target_finite
 from .._search.base import read_search_inputs
 
 
+@validate_params(
+    {
+        # sparse input reaches check_dense, whose message says what to do
+        "X": ["array-like", "sparse matrix"],
+        "y": ["array-like", "sparse matrix"],
+        "groups": ["array-like", None],
+    },
+    prefer_skip_nested_validation=True,
+)
 @fill_shared_parameters
 def spearman_relevance(X, y, *, groups=None):
     """Absolute Spearman correlation of every feature with the torque, averaged over recordings.

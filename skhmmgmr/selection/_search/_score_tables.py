@@ -7,8 +7,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from ..metrics._scores import normalize_performance
-from ..metrics._table import parse_trade_offs
+from ..._core._compat import validate_params
+from ...metrics._scores import normalize_performance
+from ...metrics._table import parse_trade_offs
 
 
 def rescore_table(results, key, trade_offs):
@@ -69,6 +70,10 @@ def relative_gain(previous, new):
     return (previous - new) / previous
 
 
+@validate_params(
+    {"table": [pd.DataFrame], "by": [str], "values": [str, list, tuple]},
+    prefer_skip_nested_validation=True,
+)
 def one_way_anova(table, *, by, values):
     """One-way ANOVA (:func:`scipy.stats.f_oneway`) of each ``values`` column across ``by``.
 

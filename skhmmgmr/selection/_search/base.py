@@ -1,9 +1,11 @@
-"""The base of the wrapper selectors: what a selector that searches over recordings shares.
+"""The base of the selectors that search over recordings: what they share.
 
-:class:`RecordingSelector` (and its mixin :class:`RecordingSearchMixin`) validate the search's
-inputs, evaluate subsets through :func:`~skhmmgmr._search._evaluation.evaluate_models` and give the
-``SelectorMixin`` support mask. :mod:`skhmmgmr.selection` is the orchestrator that runs the
-selectors of the thesis' framework in turn.
+:class:`RecordingSearchMixin` defines the parameters every such selector takes (the estimator,
+the splits, the trade-off, the sampling period, the jobs, the cache, the verbosity), validates
+the search's inputs and is the selectors' one door to the evaluation of models
+(:func:`~._evaluation.evaluate_models`); :class:`RecordingSelector` adds ``SelectorMixin``'s
+support mask for the feature selectors. :func:`read_search_inputs` is the one reader of a
+selector's ``fit`` inputs.
 """
 
 import numbers
@@ -15,11 +17,13 @@ from sklearn.base import BaseEstimator, clone
 from sklearn.feature_selection import SelectorMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._core._compat import HasMethods, Interval
-from .._core._panel import align_target, read_layout, recordings_of
-from .._core._pickled import PickleVersionMixin
-from .._core._validation import check_finite, check_target_finite, column_names_of
-from ..estimator import HMMGMRRegressor
+from ..._core._compat import HasMethods
+from ..._core._docstrings import fill_shared_parameters
+from ..._core._panel import align_target, read_layout, recordings_of
+from ..._core._pickled import PickleVersionMixin
+from ..._core._validation import check_finite, check_target_finite, column_names_of
+from ...estimator import HMMGMRRegressor
+from ...metrics._table import SAMPLING_PERIOD, WEIGHT
 from ._evaluation import check_recording_splits, evaluate_models, shared_evaluation_store
 
 
@@ -47,22 +51,71 @@ def _evaluation_context(estimator, y, groups, splits, sampling_period):
     return joblib.hash((clone(estimator), y, codes, list(ids), splits, sampling_period))
 
 
+#: The constraints of the parameters every search takes: the selectors' (through
+#: :class:`RecordingSearchMixin`) and the search functions' (:func:`search_constraints`); the
+#: trade-off's and the sampling period's are the metrics'.
+SEARCH_CONSTRAINTS = {
+    "estimator": [HasMethods(["fit", "predict"]), None],
+    "cv": ["cv_object"],
+    "accuracy_weight": WEIGHT,
+    "smoothness_weight": WEIGHT,
+    "sampling_period": SAMPLING_PERIOD,
+    "n_jobs": [numbers.Integral, None],
+    "memory": [None, str, HasMethods(["cache"])],
+    "verbose": ["verbose"],
+}
+
+
+def search_constraints(*names):
+    """The constraints of the search parameters ``names``, for ``validate_params`` of a
+    function that takes them as a selector does."""
+    return {name: SEARCH_CONSTRAINTS[name] for name in names}
+
+
+@fill_shared_parameters
 class RecordingSearchMixin:
-    """Parameters and helpers shared by the selectors that fit one model per candidate."""
+    """The parameters, checks and evaluations shared by the selectors that fit one model per
+    candidate (a feature subset, a number of states) and judge it on validation recordings.
+
+    The shared parameters are defined here once: their constraints, their storage in
+    ``__init__`` and their description (the entries of ``_core/_docstrings.py`` that the lines
+    ``{estimator}`` and ``{search parameters}`` of a docstring stand for, below and in every
+    selector's). A selector adds its own parameters to
+    ``_parameter_constraints`` and to ``__init__``, whose signature restates the shared
+    ones (scikit-learn reads an estimator's parameters from that signature) and hands them
+    to this ``__init__``.
+
+    Parameters
+    ----------
+    {estimator}
+    {search parameters}
+    """
 
     # Recording ids make the data sequences: requested by default, like HMMGMRRegressor.
     __metadata_request__fit = {"groups": True}
 
-    _common_constraints = {
-        "estimator": [HasMethods(["fit", "predict"]), None],
-        "cv": ["cv_object"],
-        "accuracy_weight": [Interval(numbers.Real, 0, None, closed="left")],
-        "smoothness_weight": [Interval(numbers.Real, 0, None, closed="left")],
-        "sampling_period": [Interval(numbers.Real, 0, None, closed="neither"), None],
-        "n_jobs": [numbers.Integral, None],
-        "memory": [None, str, HasMethods(["cache"])],
-        "verbose": ["verbose"],
-    }
+    _parameter_constraints: dict = SEARCH_CONSTRAINTS
+
+    def __init__(
+        self,
+        estimator=None,
+        *,
+        cv=5,
+        accuracy_weight=0.5,
+        smoothness_weight=0.5,
+        sampling_period=None,
+        n_jobs=None,
+        memory=None,
+        verbose=0,
+    ):
+        self.estimator = estimator
+        self.cv = cv
+        self.accuracy_weight = accuracy_weight
+        self.smoothness_weight = smoothness_weight
+        self.sampling_period = sampling_period
+        self.n_jobs = n_jobs
+        self.memory = memory
+        self.verbose = verbose
 
     def _validate_search(self, X, y, groups):
         # At least one training and one validation row.
@@ -85,33 +138,47 @@ class RecordingSearchMixin:
     def _names(self):
         return input_feature_names(self)
 
-    def _evaluate(self, X, y, groups, splits, subsets, desc):
-        estimator = default_estimator() if self.estimator is None else self.estimator
+    def _search_estimator(self):
+        return default_estimator() if self.estimator is None else self.estimator
+
+    def _evaluate_models(self, X, y, groups, splits, models, desc, *, with_bic=False):
+        """The selectors' one door to evaluation: every model, ``(columns, params)``, fitted
+        on the training recordings of every split and scored on its validation recordings
+        (:func:`~._evaluation.evaluate_models`, the full search)."""
+        return evaluate_models(
+            self._search_estimator(),
+            X,
+            y,
+            groups,
+            splits,
+            models,
+            sampling_period=self.sampling_period,
+            with_bic=with_bic,
+            n_jobs=self.n_jobs,
+            memory=self.memory,
+            verbose=self.verbose,
+            desc=desc,
+        )
+
+    def _evaluate_subsets(self, X, y, groups, splits, subsets, desc):
+        """The table of every feature subset (column indices) on every validation recording;
+        in a :func:`~._evaluation.shared_evaluations` block, the subsets another search step
+        evaluated are read, not refitted."""
         names = self._names()
         subset_names = [tuple(names[list(s)]) for s in subsets]
         shared = shared_evaluation_store()
         context = known = None
         if shared is not None and hasattr(self, "feature_names_in_"):
-            context = _evaluation_context(estimator, y, groups, splits, self.sampling_period)
+            context = _evaluation_context(
+                self._search_estimator(), y, groups, splits, self.sampling_period
+            )
             known = {
                 i: shared[context, key]
                 for i, key in enumerate(subset_names)
                 if (context, key) in shared
             }
         todo = [i for i in range(len(subsets)) if not known or i not in known]
-        table = evaluate_models(
-            estimator,
-            X,
-            y,
-            groups,
-            splits,
-            [(subsets[i], {}) for i in todo],
-            sampling_period=self.sampling_period,
-            n_jobs=self.n_jobs,
-            memory=self.memory,
-            verbose=self.verbose,
-            desc=desc,
-        )
+        table = self._evaluate_models(X, y, groups, splits, [(subsets[i], {}) for i in todo], desc)
         if known is not None:
             table = self._merge_shared(table, todo, known, shared, context, subset_names)
         table.insert(1, "subset", [subset_names[i] for i in table["model"]])
@@ -129,10 +196,6 @@ class RecordingSearchMixin:
             return table
         merged = pd.concat([pieces[i].assign(model=i) for i in sorted(pieces)], ignore_index=True)
         return merged[["model", *[c for c in merged.columns if c != "model"]]]
-
-    def _get_support_mask(self):
-        check_is_fitted(self, "support_")
-        return self.support_
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
@@ -177,3 +240,7 @@ def read_search_inputs(selector, X, y, groups, *, min_samples=1):
 
 class RecordingSelector(PickleVersionMixin, RecordingSearchMixin, SelectorMixin, BaseEstimator):
     """Feature selector over recordings (fit on training, judge on validation recordings)."""
+
+    def _get_support_mask(self):
+        check_is_fitted(self, "support_")
+        return self.support_

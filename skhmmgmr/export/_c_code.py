@@ -1,0 +1,236 @@
+"""The parts of ``<name>.c`` that depend on the model: its parameters as ``static const``
+arrays, the derived inputs of a torque pipeline, the log-densities and the state output means.
+
+Every number and every operation is of the filter's arithmetic (``double``, or ``float`` for
+``dtype="float32"``: ``float`` literals and ``expf``, ``tanhf``, ``powf``, ``fabsf``, so that no
+value is promoted to ``double`` on the way); a signed power ``sign(x) |x|^p`` is a chain of
+multiplications in single precision up to :data:`CHAINED_POWERS`, ``pow``/``powf`` beyond (and
+for ``p > 2`` in double precision, as :class:`~skhmmgmr.SteeringFeatures` computes it).
+"""
+
+import numpy as np
+
+from ._c_text import TYPES, array, check_float32, number, string
+
+# Signed powers up to this are multiplication chains in single precision.
+CHAINED_POWERS = 8
+
+
+def _triangle(gating):
+    """The upper triangle of every state's rows, row by row (row ``i`` from column ``i``)."""
+    n_inputs = gating.shape[-1]
+    return np.concatenate([g[i, i:] for g in gating for i in range(n_inputs)])
+
+
+def _named_parameters(spec):
+    """``(name, values, comment)`` of every array and constant of ``<name>.c``."""
+    gating = spec.gating[:1] if spec.shared_gating else spec.gating
+    if spec.triangular:
+        gating_values, layout = _triangle(gating), "upper triangle, row by row"
+    else:
+        gating_values, layout = gating, "row by row"
+    parts = [
+        ("input_center", spec.input_center, None),
+        ("input_scale", spec.input_scale, None),
+        ("output_center", spec.output_center, None),
+        ("output_scale", spec.output_scale, None),
+        ("prior_estimate", spec.prior_estimate, "output mean and std before any sample"),
+        ("prior_std", spec.prior_std, None),
+        ("startprob", spec.startprob, None),
+        ("transmat_t", spec.transmat.T, "row j: probabilities of entering state j from each"),
+        ("gating", gating_values, f"weights of z_i in the density terms ({layout})"),
+        ("offsets", spec.offsets, "constant of every density term"),
+        ("norms", spec.norms[:1] if spec.shared_gating else spec.norms, "log normalisers"),
+        ("coef", spec.coef[:1] if spec.shared_coef else spec.coef, "output means: coef z + b"),
+        ("intercept", spec.intercept, None),
+        ("conditional_variances", spec.conditional_variances, None),
+    ]
+    if spec.smoothed:
+        decay = spec.output_decay
+        parts.append(("output_decay", decay, "first-order read-out"))
+        parts.append(("output_gain", 1.0 - decay, None))
+    constants = []
+    derived = spec.derived
+    if derived.friction is not None:
+        constants.append(("friction_velocity", derived.friction[1]))
+    if derived.velocity_decay is not None:
+        constants.append(("velocity_decay", derived.velocity_decay))
+        constants.append(("velocity_gain", 1.0 - derived.velocity_decay))
+    if spec.min_log_density is not None:
+        constants.append(("min_log_density", spec.min_log_density))
+    return parts, constants
+
+
+def parameters(spec, dtype):
+    """The ``static const`` arrays and constants of ``<name>.c`` (the input names first)."""
+    arrays, constants = _named_parameters(spec)
+    if dtype == "float32":
+        check_float32({name: values for name, values, _ in arrays} | dict(constants))
+    real = TYPES[dtype]["real"]
+    names = [f"input_name_{i}" for i in range(spec.n_raw_inputs)]
+    parts = [string(text, name) for text, name in zip(spec.input_names, names, strict=True)]
+    listed = ",\n    ".join(names)
+    parts.append(
+        f"static const char *const input_names[{spec.n_raw_inputs}] = {{\n    {listed}\n}};\n"
+    )
+    parts += [array(name, dtype, values, comment) for name, values, comment in arrays]
+    parts += [
+        f"static const {real} {name} = {number(value, dtype)};\n" for name, value in constants
+    ]
+    return "\n".join(parts)
+
+
+def _power(x, power, dtype):
+    """C expression of ``|x|^power`` in ``dtype``."""
+    types = TYPES[dtype]
+    size = f"{types['fabs']}({x})"
+    if power == 2 or (dtype == "float32" and power <= CHAINED_POWERS):
+        return " * ".join([size] * power)
+    return f"{types['pow']}({size}, {number(power, dtype)})"
+
+
+def derived_code(spec, dtype):
+    """Statements writing the derived inputs into ``x[n_raw:]`` (and the velocity filter)."""
+    derived, column, tanh = spec.derived, spec.n_raw_inputs, TYPES[dtype]["tanh"]
+    lines = []
+    if derived.friction is not None:
+        velocity = f"inputs[{derived.friction[0]}]"
+        if derived.velocity_decay is not None:
+            velocity = f"low_pass(state, {velocity})"
+        lines.append(f"    x[{column}] = {tanh}({velocity} / friction_velocity);")
+        column += 1
+    for position, power in derived.powers:
+        magnitude = _power(f"inputs[{position}]", power, dtype)
+        lines.append(f"    x[{column}] = signum(inputs[{position}]) * ({magnitude});")
+        column += 1
+    return "\n".join(lines)
+
+
+_LOW_PASS = """
+/* The velocity through the first-order low-pass filter of SteeringFeatures (low_pass): the
+ * first finite value is taken as it is, the next after g non-finite ones over g + 1 periods. */
+static @REAL@ low_pass(@NAME@_state *state, @REAL@ velocity)
+{
+    @REAL@ lapse;
+    if (!isfinite(velocity)) {
+        if (state->velocity_since > @ZERO@) {
+            state->velocity_since += @ONE@;
+        }
+        return velocity;
+    }
+    if (state->velocity_since == @ZERO@) {
+        state->velocity = velocity_gain * velocity + velocity_decay * velocity;
+    } else if (state->velocity_since == @ONE@) {
+        state->velocity = velocity_gain * velocity + velocity_decay * state->velocity;
+    } else {
+        lapse = @POW@(velocity_decay, state->velocity_since);
+        state->velocity = velocity_gain * velocity
+                          + (lapse * state->velocity + (velocity_decay - lapse) * velocity);
+    }
+    state->velocity_since = @ONE@;
+    return state->velocity;
+}
+"""
+
+_SIGNUM = """
+static @REAL@ signum(@REAL@ value)
+{
+    return (@REAL@)((value > @ZERO@) - (value < @ZERO@));
+}
+"""
+
+
+def helpers(spec, name, dtype):
+    """The static functions the derived inputs need: the velocity filter and the sign."""
+    types = TYPES[dtype]
+    words = {
+        "NAME": name,
+        "REAL": types["real"],
+        "POW": types["pow"],
+        "ZERO": number(0.0, dtype),
+        "ONE": number(1.0, dtype),
+    }
+    text = ""
+    if spec.derived.velocity_decay is not None:
+        text += _LOW_PASS
+    if spec.derived.powers:
+        text += _SIGNUM
+    for word, value in words.items():
+        text = text.replace(f"@{word}@", value)
+    return text
+
+
+def density_code(spec, real):
+    """Body of ``log_densities``: ``log_prob[k]`` for every state."""
+    n_states, n_inputs = spec.n_states, spec.n_inputs
+    start = "i" if spec.triangular else "0"
+    width = f"{n_inputs} - i" if spec.triangular else f"{n_inputs}"
+    whiten = f"""\
+        for (i = 0; i < {n_inputs}; ++i) {{
+            const {real} zi = z[i];
+            for (j = {start}; j < {n_inputs}; ++j) {{
+                terms[j] += zi * weights[j - {start}];
+            }}
+            weights += {width};
+        }}"""
+    if spec.shared_gating:
+        return f"""\
+    {real} whitened[{n_inputs}];
+    const {real} *weights = gating;
+    int i, j, k;
+    for (j = 0; j < {n_inputs}; ++j) {{
+        whitened[j] = 0;
+    }}
+    {{
+        {real} *terms = whitened;
+{whiten}
+    }}
+    for (k = 0; k < {n_states}; ++k) {{
+        {real} total = norms[0];
+        for (j = 0; j < {n_inputs}; ++j) {{
+            const {real} term = whitened[j] + offsets[k * {n_inputs} + j];
+            total -= term * term;
+        }}
+        log_prob[k] = total;
+    }}"""
+    return f"""\
+    {real} terms[{n_inputs}];
+    const {real} *weights = gating;
+    int i, j, k;
+    for (k = 0; k < {n_states}; ++k) {{
+        {real} total = norms[k];
+        for (j = 0; j < {n_inputs}; ++j) {{
+            terms[j] = offsets[k * {n_inputs} + j];
+        }}
+{whiten}
+        for (j = 0; j < {n_inputs}; ++j) {{
+            total -= terms[j] * terms[j];
+        }}
+        log_prob[k] = total;
+    }}"""
+
+
+def means_code(spec, real):
+    """Body of ``output_means``: ``means[k * n_outputs + o]`` for every state."""
+    n_states, n_outputs, n_inputs = spec.n_states, spec.n_outputs, spec.n_inputs
+    if spec.shared_coef:
+        return f"""\
+    int i, k, o;
+    for (o = 0; o < {n_outputs}; ++o) {{
+        {real} slope = 0;
+        for (i = 0; i < {n_inputs}; ++i) {{
+            slope += coef[o * {n_inputs} + i] * z[i];
+        }}
+        for (k = 0; k < {n_states}; ++k) {{
+            means[k * {n_outputs} + o] = slope + intercept[k * {n_outputs} + o];
+        }}
+    }}"""
+    return f"""\
+    int i, k;
+    for (k = 0; k < {n_states * n_outputs}; ++k) {{
+        {real} mean = intercept[k];
+        for (i = 0; i < {n_inputs}; ++i) {{
+            mean += coef[k * {n_inputs} + i] * z[i];
+        }}
+        means[k] = mean;
+    }}"""
