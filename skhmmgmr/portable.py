@@ -155,7 +155,12 @@ from ._hmm._portable import (
 )
 from ._version import __version__
 from .estimator import HierarchicalHMMGMRRegressor, HMMGMRRegressor
-from .torque_pipeline import SteeringFeatures, TorquePipeline, restore_steering_features
+from .torque_pipeline import (
+    DriverModel,
+    SteeringFeatures,
+    TorquePipeline,
+    restore_steering_features,
+)
 
 __all__ = [
     "FIT_INFO_KEYS",
@@ -177,8 +182,12 @@ MODEL_TYPES = {
     REGRESSOR_TYPE: HMMGMRRegressor,
     HIERARCHICAL_TYPE: HierarchicalHMMGMRRegressor,
     "TorquePipeline": TorquePipeline,
+    "DriverModel": DriverModel,
     "Pipeline": Pipeline,
 }
+#: The keys of a driver model's block (``driver_model``): its trade-off and the perturbation
+#: it was fitted on.
+DRIVER_MODEL_KEYS = ("perturbation_penalty", "perturbation_rms", "perturbed_share")
 STEERING_TYPE = "SteeringFeatures"
 STEERING_PARAMS = (
     "friction_velocity",
@@ -473,7 +482,7 @@ def _model_dict(fitted, *, output_names, units, period):
         periods = [step.sampling_period for _, step in transformers]
         period = next((p for p in periods if p is not None), None)
     names = [*_inputs_of(steps[0]), *model["output_names"]]
-    return {
+    data = {
         "format": FORMAT_NAME,
         "format_version": model["format_version"],  # the lowest that holds the regressor
         "package_version": __version__,
@@ -481,6 +490,13 @@ def _model_dict(fitted, *, output_names, units, period):
         "training": _training({}, units, period, names),
         "steps": steps,
     }
+    if model_type == "DriverModel":
+        data["driver_model"] = {
+            "perturbation_penalty": float(fitted.perturbation_penalty),
+            "perturbation_rms": float(fitted.perturbation_rms_),
+            "perturbed_share": float(fitted.perturbed_share_),
+        }
+    return data
 
 
 def _inputs_of(step):
@@ -598,7 +614,13 @@ def _pipeline_from_dict(data, cls):
     longest = regressor.longest_recording_
     if longest is not None:
         training = {"longest_recording": longest, **training}
-    return cls(steps), training
+    if cls is not DriverModel:
+        return cls(steps), training
+    block = data["driver_model"]
+    model = DriverModel(steps, perturbation_penalty=block["perturbation_penalty"])
+    model.perturbation_rms_ = block["perturbation_rms"]
+    model.perturbed_share_ = block["perturbed_share"]
+    return model, training
 
 
 def _regressor_step(model, where, kind):

@@ -62,4 +62,11 @@ PREVIEW_FEATURES = (
     "heading_deviation_30m",
     "road_curvature_30m",
 )
+# What a driver model reads (make_driver_model): every sensed feature but the steering wheel's
+# acceleration, which the logger differentiates twice from the angle (a few samples late): at the
+# wheel a model's torque would follow it, a delayed positive feedback on the wheel's inertia
+# that makes the model oscillate at 20 Hz.
+DRIVER_MODEL_FEATURES = tuple(
+    name for name in FEATURE_NAMES if name != "steering_wheel_acceleration"
+)
 TARGET_UNIT = "Nm"
