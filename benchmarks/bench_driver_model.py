@@ -95,6 +95,9 @@ def _parse(argv=None):
     parser.add_argument("--duration", type=float, default=120.0, help="drive length [s]")
     parser.add_argument("--train-duration", type=float, default=60.0, help="sections [s]")
     parser.add_argument("--perturbation", type=float, default=0.1, help="RMS [Nm]")
+    parser.add_argument(
+        "--share", type=float, default=1.0, help="share of the training recordings perturbed"
+    )
     parser.add_argument("--penalty", type=float, default=DEFAULT_PERTURBATION_PENALTY)
     parser.add_argument("--models", nargs="+", default=list(MODELS))
     parser.add_argument("--drop", nargs="*", default=[], help="inputs the driver model leaves out")
@@ -132,7 +135,9 @@ def protocols(style, rate, car, seed, args):
     )
     try:
         plain = make_driving_protocol((style,), **common)
-        perturbed = make_driving_protocol((style,), perturbation=args.perturbation, **common)
+        perturbed = make_driving_protocol(
+            (style,), perturbation=args.perturbation, perturbed_share=args.share, **common
+        )
     except RuntimeError:
         return None
     return plain, perturbed

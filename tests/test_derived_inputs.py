@@ -259,3 +259,67 @@ def test_the_recordings_reach_the_choice_by_every_path(data):
     assert not np.allclose(
         table(X, y)["validation_rmse"].to_numpy(), expected["validation_rmse"].to_numpy()
     )
+
+
+def test_the_sampling_period_is_read_from_a_panels_time_index(data):
+    """#51 item 13: fitted on a panel whose time index says 0.01 s, the pipeline never
+    considered the velocity filter (the command line infers the period)."""
+    panel = to_panel(data.assign(time=data.groupby("recording").cumcount() * PERIOD))
+    X, y = panel[COLUMNS], panel["driver_torque"]
+    pipe = make_torque_pipeline(2, n_iter=2, random_state=0).fit(X, y)
+    assert pipe[0].sampling_period_ == pytest.approx(PERIOD, rel=1e-12)
+    assert pipe[0].sampling_period is None  # the parameter stays as given
+    considered = set(pipe[0].friction_search_["velocity_filter"])
+    assert considered == set(FILTER_CANDIDATES)
+    # the same choice as with the period given, and a fixed filter needs no more
+    given = _auto(sampling_period=PERIOD).fit(X, y)
+    pd.testing.assert_frame_equal(pipe[0].friction_search_, given.friction_search_)
+    fixed = SteeringFeatures(velocity_filter=0.02).fit(X)
+    assert fixed.sampling_period_ == pytest.approx(PERIOD, rel=1e-12)
+    assert fixed.stream_settings()["filter_decay"] == pytest.approx(math.exp(-PERIOD / 0.02))
+    # without a time level there is nothing to read: no filter considered, a fixed one refused
+    plain = _auto().fit(data[COLUMNS], data["driver_torque"], groups=data["recording"])
+    assert plain.sampling_period_ is None
+    assert set(plain.friction_search_["velocity_filter"]) == {None}
+    with pytest.raises(ValueError, match="needs sampling_period.*'time' index level"):
+        SteeringFeatures(velocity_filter=0.02).fit(data[COLUMNS])
+
+
+def test_the_model_file_keeps_the_period_read_from_the_index(data, tmp_path):
+    panel = to_panel(data.assign(time=data.groupby("recording").cumcount() * PERIOD))
+    X, y = panel[COLUMNS], panel["driver_torque"]
+    step = SteeringFeatures(velocity_filter=0.02)
+    pipe = make_torque_pipeline(2, velocity_filter=0.02, n_iter=2, random_state=0).fit(X, y)
+    portable.save(pipe, tmp_path / "pipe.json")
+    loaded = portable.load(tmp_path / "pipe.json")
+    assert loaded[0].sampling_period == pytest.approx(PERIOD)
+    np.testing.assert_allclose(loaded.predict(X), pipe.predict(X), rtol=0, atol=1e-12)
+    assert step.get_params()["sampling_period"] is None
+    # the FMU runs at the period the filter was made for, refusing another
+    from skhmmgmr.export import write_fmu
+
+    write_fmu(pipe, tmp_path / "driver.fmu", binary=False)
+    with pytest.raises(ValueError, match="not the period"):
+        write_fmu(pipe, tmp_path / "other.fmu", binary=False, sampling_period=2 * PERIOD)
+
+
+def test_a_target_of_other_rows_is_refused_naming_both_lengths(data):
+    """#51 item 22: y one row short gave "cannot reshape array of size 599"; one shared
+    check (in_filter_order) names the lengths wherever the pipeline reads per-row
+    arguments."""
+    X, y = data[COLUMNS].iloc[:600], data["driver_torque"].iloc[:600]
+    short = y.to_numpy()[:-1]
+    with pytest.raises(ValueError, match="X has 600, y has 599"):
+        _auto().fit(X, short)
+    pipe = make_torque_pipeline(2, n_iter=2, random_state=0)
+    with pytest.raises(ValueError, match="X has 600, y has 599"):
+        pipe.fit(X, short)
+    pipe.fit(X, y)
+    with pytest.raises(ValueError, match="X has 600, y has 599"):
+        pipe.score(X, short)
+    with pytest.raises(ValueError, match="X has 600, sample_weight has 599"):
+        pipe.score(X, y, sample_weight=np.ones(599))
+    with pytest.raises(ValueError, match="X has 600, y has 599"):
+        pipe.adapt(X, short)
+    with pytest.raises(ValueError, match="X has 600, time has 599"):
+        pipe.predict(X, time=np.arange(599) * PERIOD)

@@ -11,6 +11,7 @@ from sklearn.model_selection import GridSearchCV, GroupKFold
 
 from skhmmgmr import PerformanceScore, make_driver_model, make_torque_pipeline, portable
 from skhmmgmr.datasets import (
+    DRIVER_MODEL_FEATURES,
     FEATURE_NAMES,
     PREVIEW_FEATURES,
     drive,
@@ -21,7 +22,8 @@ from skhmmgmr.metrics import lane_keeping_metrics
 from skhmmgmr.selection import ClosedLoopScorer, make_closed_loop_scorer
 from skhmmgmr.torque_pipeline import DriverModel
 
-FEATURES = list(FEATURE_NAMES)
+FEATURES = list(DRIVER_MODEL_FEATURES)
+SENSED = list(FEATURE_NAMES)  # what the simulator hands a driver
 PERTURBATION = "steering_perturbation"
 RATE = 20.0
 
@@ -109,10 +111,10 @@ def test_without_perturbation_or_penalty_it_is_the_torque_pipeline(train):
 
 def test_the_perturbation_penalises_a_pandas_or_2d_target_alike(train):
     p = train[PERTURBATION].to_numpy()
-    driver = make_driver_model(friction_velocity=0.1, velocity_filter=None, random_state=0)
+    driver = make_driver_model(perturbation_penalty=1.5, random_state=0)
     as_series = driver._penalised_target(train["driver_torque"], p)
     assert as_series.index.equals(train.index)
-    assert_allclose(as_series, train["driver_torque"] - p)
+    assert_allclose(as_series, train["driver_torque"] - 1.5 * p)
     column = driver._penalised_target(train[["driver_torque"]].to_numpy(), p)
     assert column.shape == (len(train), 1)
     assert_allclose(column[:, 0], as_series)
@@ -151,14 +153,15 @@ def test_the_model_at_the_wheel_is_its_predict_on_what_it_sensed(model):
 
     def plain(row):
         history.append(row.copy())
-        return model.predict(pd.DataFrame(history, columns=FEATURES))[-1]
+        return model.predict(pd.DataFrame(history, columns=SENSED)[FEATURES])[-1]
 
     streamed = drive(model, **road)
     looped = drive(plain, **road)
     pd.testing.assert_frame_equal(streamed[FEATURES], looped[FEATURES], rtol=0, atol=1e-9)
     assert_allclose(streamed["driver_torque"], looped["driver_torque"], rtol=0, atol=1e-9)
     # with a rigid column and clean sensors the sensor reads the model's own torque
-    rigid = drive(model, **{**road, "vehicle": None, "sensor_noise": None})
+    rigid = drive(model, **{**road, "duration": 3.0, "vehicle": None, "sensor_noise": None})
+    assert len(rigid) == 60  # (kept control)
     assert_allclose(rigid["driver_torque"], model.predict(rigid[FEATURES]), rtol=0, atol=1e-12)
 
 

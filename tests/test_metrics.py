@@ -660,3 +660,37 @@ def test_a_scorer_predicts_a_routing_pipeline_once(monkeypatch):
         assert len(calls) == 1
         assert once == pytest.approx(reference(pipe, X, y, groups=groups), abs=1e-12)
         assert len(calls) == 1 + 24
+
+
+def test_the_metric_functions_read_the_recordings_of_a_panel_index():
+    """#51 item 12: evaluate_recordings read a panel as one recording (one row, the smoothness
+    inflated by the jumps between recordings), although every scorer reads its index."""
+    rng = np.random.default_rng(1)
+    lengths = {"r1": 30, "r2": 40, "r3": 50}
+    recordings = np.repeat(list(lengths), list(lengths.values()))
+    time = np.concatenate([np.arange(n) * 0.05 for n in lengths.values()])
+    y_true = rng.normal(size=len(time)).cumsum()
+    y_pred = y_true + 0.3 * rng.normal(size=len(time))
+    index = pd.MultiIndex.from_arrays([recordings, time], names=["recording", "time"])
+    order = rng.permutation(len(time))  # the panel's rows in any order
+    panel_true = pd.Series(y_true, index=index).iloc[order]
+    table = evaluate_recordings(panel_true, y_pred[order])  # the time steps from the index
+    assert sorted(table["recording"]) == list(lengths)
+    table = table.set_index("recording").loc[list(lengths)]
+    for rec, n in lengths.items():  # a plain loop per recording
+        rows = recordings == rec
+        error = y_pred[rows] - y_true[rows]
+        assert table.loc[rec, "n_samples"] == n
+        assert table.loc[rec, "rmse"] == pytest.approx(np.sqrt(np.mean(error**2)), rel=1e-12)
+        slope = np.diff(y_pred[rows]) / 0.05
+        assert table.loc[rec, "smoothness"] == pytest.approx(np.std(slope), rel=1e-9)
+    # the same recordings with a sampling period, and in the other metric functions
+    by_period = evaluate_recordings(panel_true, y_pred[order], sampling_period=0.05)
+    assert_allclose(by_period.set_index("recording").loc[list(lengths)], table, rtol=1e-9)
+    mean_smoothness = table["smoothness"].mean()
+    assert smoothness_score(pd.Series(y_pred, index=index).iloc[order]) == pytest.approx(
+        mean_smoothness, rel=1e-9
+    )
+    assert accuracy_score(panel_true, y_pred[order]) == pytest.approx(
+        table["accuracy"].mean(), rel=1e-12
+    )

@@ -152,6 +152,41 @@ def test_auto_leaves_an_estimate_already_smooth_enough(data, plain):
     assert weakest_decay(estimate[:, None], rough[:, None], short).tolist() == [0.0]
 
 
+def _accuracies(estimate, target, groups):
+    """Accuracy (1 - RMSE / SD) * 100 of every recording, as a plain loop."""
+    out = []
+    for group in pd.unique(groups):
+        rows = groups == group
+        rmse = np.sqrt(np.mean((estimate[rows] - target[rows]) ** 2))
+        out.append((1.0 - rmse / np.std(target[rows])) * 100.0)
+    return np.array(out)
+
+
+def test_auto_keeps_no_read_out_that_changes_nothing_that_matters():
+    """#51 item 15: "auto" chose a read-out of a = 0.0036 (at most 0.0008 Nm of change), which
+    made the pipeline's model file format version 3 for nothing."""
+    rng = np.random.default_rng(0)
+    groups = np.repeat(["a", "b", "c"], 400)
+    t = np.arange(len(groups)) * 0.05
+    estimate = np.sin(0.7 * t) + 0.3 * np.sin(2.3 * t) + 0.02 * rng.standard_normal(len(t))
+    recordings = recordings_of(groups, len(groups))
+    # a measured output a read-out of a = 0.004 matches: that read-out lowers the roughness
+    # by less than 1 % and moves no recording's accuracy by 0.1 point
+    target = _loop(estimate, groups, 0.004)
+    weak = _loop(estimate, groups, 0.004)
+    assert _roughness_loop(weak, groups) > 0.99 * _roughness_loop(estimate, groups)
+    moved = np.abs(_accuracies(weak, target, groups) - _accuracies(estimate, target, groups))
+    assert moved.max() < 0.1
+    assert weakest_decay(estimate[:, None], target[:, None], recordings).tolist() == [0.0]
+    # one that matters (a = 0.3) is kept, the weakest that meets the rule
+    target = _loop(estimate, groups, 0.3)
+    decay = weakest_decay(estimate[:, None], target[:, None], recordings)[0]
+    assert decay == pytest.approx(0.3, abs=1e-3)
+    smoothed = _loop(estimate, groups, decay)
+    assert _roughness_loop(smoothed, groups) <= _roughness_loop(target, groups)
+    assert _roughness_loop(smoothed, groups) < 0.99 * _roughness_loop(estimate, groups)
+
+
 def test_auto_chooses_one_read_out_per_output(data):
     targets = ["driver_torque", "yaw_rate"]
     inputs = ["steering_wheel_angle", "lateral_acceleration"]

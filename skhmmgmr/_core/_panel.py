@@ -9,9 +9,12 @@ module reads that index and puts the rows into the order the filter needs (recor
 contiguous, each in time order); the estimator gives its results back in the caller's order.
 """
 
+from collections.abc import Hashable
+
 import numpy as np
 import pandas as pd
 
+from ._compat import validate_params
 from ._schema import RECORDING, TIME
 from ._sequences import as_recordings, check_min_length, check_time_order, one_recording
 
@@ -20,9 +23,14 @@ class RecordingLayout:
     """The recordings of a call: recording id, time and position of every row, read once.
 
     The one parser, :func:`read_layout`, makes it at the outermost public call; what that
-    call hands on (a pipeline's steps, the ``predict`` of a scorer, the metric code) gets
-    :meth:`handed_down`'s ids as ``groups`` and reads the same layout from them instead of
-    parsing again.
+    call hands on (a pipeline's steps, the ``predict`` of a scorer, the metric code) gets the
+    rows in filter order with :meth:`handed_down`, this layout for those rows, as ``groups``,
+    and reads it back instead of parsing again (:func:`in_filter_order` does all of that).
+
+    A handed-down layout stands for the recording ids of its rows: ``numpy.asarray`` and
+    ``len`` give them, iterating reads them; it is never sliced (a ``TypeError``), because
+    a slice would need a layout of its own: ``numpy.asarray(groups)[rows]`` gives the ids of
+    some rows, to be read afresh.
 
     Attributes
     ----------
@@ -72,6 +80,13 @@ class RecordingLayout:
         restored[self.order] = values
         return restored
 
+    def answer(self, result):
+        """A result computed in filter order (an array, a tuple of them, or anything else,
+        given back as it is) in the caller's rows."""
+        if isinstance(result, tuple):
+            return tuple(self.answer(part) for part in result)
+        return self.to_caller_order(result) if isinstance(result, np.ndarray) else result
+
     def recordings(self, n_samples, *, min_length=1):
         """The contiguous recordings of the ``n_samples`` rows in filter order
         (:class:`~skhmmgmr._core._sequences.Recordings`): parsed at the first call, then
@@ -91,16 +106,19 @@ class RecordingLayout:
         return recordings
 
     def handed_down(self):
-        """The recording ids of the rows in filter order, carrying this layout, to pass as
-        ``groups`` with the rows in filter order (``None`` for one recording)."""
+        """This layout for the rows in filter order, to pass on as ``groups`` with them
+        (``None`` for one recording): read back by :func:`read_layout` and
+        :func:`recordings_of` without parsing."""
         if self.groups is None:
             return None
-        if getattr(self.groups, "_layout", None) is self:  # handed down already
-            return self.groups
+        if self.order is None and self._handed is self:  # handed down already
+            return self
         if self._handed is not None:
             return self._handed
+        ids = np.array(self.groups, copy=True)
+        ids.flags.writeable = False
         layout = RecordingLayout(
-            self.groups,
+            ids,
             self.time,
             None,
             canonical=self.canonical,
@@ -108,19 +126,54 @@ class RecordingLayout:
             recordings=self._recordings,
         )
         layout._time_checked = self._time_checked
-        ids = np.array(self.groups, copy=True).view(RecordingIds)
-        ids.flags.writeable = False
-        ids._layout = layout
-        layout.groups = self._handed = ids
-        return ids
+        layout._handed = layout
+        self._handed = layout
+        return layout
 
+    def with_time(self, time):
+        """This handed-down layout with the time stamps ``time`` (one per row, in filter
+        order; a time column may count from another origin than an index level), its
+        recordings kept and the time checked to increase within each when they are read."""
+        if time is self.time:
+            return self
+        layout = RecordingLayout(
+            self.groups,
+            time,
+            None,
+            canonical=self.canonical,
+            from_index=self.from_index,
+            recordings=self._recordings,
+        )
+        layout._handed = layout
+        return layout
 
-class RecordingIds(np.ndarray):
-    """Recording ids handed down with their :class:`RecordingLayout` (read-only). A slice, a
-    view or a copy carries no layout: whoever gets one parses it again."""
+    # A handed-down layout stands for its recording ids wherever ``groups`` is read as an
+    # array (scikit-learn's splitters, a user's estimator); a slice of it is refused.
+    def __array__(self, dtype=None, copy=None):
+        if copy:
+            return np.array(self._ids(), dtype=dtype, copy=True)
+        return np.asarray(self._ids(), dtype=dtype)
 
-    def __array_finalize__(self, obj):
-        self._layout = None
+    def __len__(self):
+        return len(self._ids())
+
+    def __bool__(self):  # given recordings, whatever their number of rows
+        return True
+
+    def __iter__(self):
+        return iter(self._ids())
+
+    def __getitem__(self, key):
+        raise TypeError(
+            "these groups are the recordings skhmmgmr handed down with the rows (a "
+            "RecordingLayout), which are not sliced: a slice needs a layout of its own. Take "
+            "the ids of some rows with numpy.asarray(groups)[rows]."
+        )
+
+    def _ids(self):
+        if self.groups is None:
+            raise TypeError("a layout of one recording holds no recording ids")
+        return self.groups
 
 
 class RowOrder(RecordingLayout):
@@ -130,14 +183,22 @@ class RowOrder(RecordingLayout):
     __slots__ = ()
 
 
-def handed_layout(groups, time=None, *, canonical=False):
-    """The layout that ``groups`` carries (see :meth:`RecordingLayout.handed_down`), or
-    ``None``: none, or one read in another order than ``canonical`` asks for, or a ``time``
-    given beside it."""
-    layout = getattr(groups, "_layout", None)
-    if layout is None or time is not None or (canonical and not layout.canonical):
+def _handed(groups, n_samples):
+    """``groups`` when it is a handed-down :class:`RecordingLayout` for ``n_samples`` rows
+    (``None`` when it is no layout); a layout for other rows is refused, naming both."""
+    if not isinstance(groups, RecordingLayout):
         return None
-    return layout
+    if groups.order is not None:
+        raise TypeError(
+            "groups is a RecordingLayout in the caller's row order; hand down "
+            "layout.handed_down() with the rows in filter order"
+        )
+    if n_samples is not None and len(groups) != n_samples:
+        raise ValueError(
+            f"groups holds the recordings of {len(groups)} rows but X has {n_samples} rows; "
+            "the recordings handed down belong to other rows"
+        )
+    return groups
 
 
 # Names under which the index levels are read: the package's own, then sktime's (its panel
@@ -217,8 +278,10 @@ def read_layout(X, groups=None, time=None, *, canonical=False, reorder_groups=Tr
     """The one parser of recordings: recording ids, time stamps and row order of a call, from
     its arguments or the index of ``X``.
 
-    ``groups`` handed down by an outer call (:meth:`RecordingLayout.handed_down`) give back
-    their layout without parsing. Otherwise ``groups`` and ``time`` given explicitly win over
+    ``groups`` handed down by an outer call (:meth:`RecordingLayout.handed_down`) are their
+    layout, given back without parsing (with ``time``, its time; read afresh from its ids
+    when ``canonical`` asks for an order it is not in); a layout of another number of rows
+    than ``X`` is refused. Otherwise ``groups`` and ``time`` given explicitly win over
     nothing: when the index holds them too, both must agree row by row. When the index holds
     the recordings and the time, the rows of a recording may come in any order and
     interleaved with other recordings: the returned order makes recordings contiguous and
@@ -245,9 +308,12 @@ def read_layout(X, groups=None, time=None, *, canonical=False, reorder_groups=Tr
     -------
     RecordingLayout
     """
-    layout = handed_layout(groups, time, canonical=canonical)
+    layout = _handed(groups, None if X is None else _n_rows(X))
     if layout is not None:
-        return layout
+        if canonical and not layout.canonical:
+            groups = np.asarray(layout)
+        else:
+            return layout if time is None else layout.with_time(time)
     index_recording, index_time = index_levels(X)
     if index_recording is None:
         if index_time is not None and time is None:
@@ -281,13 +347,73 @@ def recordings_of(groups, n_samples, *, time=None, min_length=1):
     """The recordings of ``n_samples`` rows in filter order whose ids are ``groups`` (those
     handed down by an outer call carry them already), with ``time`` checked to increase
     within each and every recording at least ``min_length`` rows long."""
-    layout = handed_layout(groups)
+    layout = _handed(groups, n_samples)
     if layout is None:
         return as_recordings(groups, n_samples, time=time, min_length=min_length)
     recordings = layout.recordings(n_samples, min_length=min_length)
     if time is not None:
         check_time_order(np.asarray(time, dtype=float), recordings, n_samples)
     return recordings
+
+
+def in_filter_order(run, X, groups=None, *, time=None, y=None, rows=None, canonical=False):
+    """Read the layout of a call, run it in filter order, answer in the caller's order.
+
+    The prologue of every public method that reads recordings: every per-row argument is
+    checked to have the rows of ``X`` (:func:`check_named_lengths`), the layout read once
+    (:func:`read_layout` of ``X``, ``groups`` and ``time``), then ``run(layout, X, **rows)``
+    gets the layout of the rows in filter order (its :meth:`~RecordingLayout.handed_down`
+    is what to pass on as ``groups``; ``layout.time`` and ``layout.recordings`` read it) and
+    ``X``, ``y`` and every array of ``rows`` in filter order. Arrays in what ``run``
+    returns (alone or in a tuple) come back in the caller's row order.
+
+    Parameters
+    ----------
+    run : callable
+        ``run(layout, X, **rows)``, with ``y=`` among ``rows`` when ``y`` is given.
+    X : array-like, pandas.DataFrame or pandas.Series
+        The rows; a panel's index gives the recordings and the time.
+    groups, time : array-like of shape (n_samples,), default=None
+        As for :func:`read_layout`.
+    y : array-like, default=None
+        The target: a pandas object is paired with a panel ``X`` by label
+        (:func:`align_target`).
+    rows : dict of str to array-like, default=None
+        Other per-row arguments (``None`` values are passed as they are), paired by position.
+    canonical : bool, default=False
+        As for :func:`read_layout` (a fit).
+    """
+    rows = dict(rows or {})
+    if y is not None:
+        rows["y"] = y
+    check_named_lengths(X=X, **rows)  # (groups and time: the parser names them)
+    layout = read_layout(X, groups, time, canonical=canonical)
+    if y is not None:
+        rows["y"] = align_target(X, y, layout)
+    ordered = {name: layout.to_filter_order(values) for name, values in rows.items()}
+    # one recording: no reordering (only a recording level reorders), nothing to hand down
+    in_order = layout if layout.groups is None else layout.handed_down()
+    return layout.answer(run(in_order, layout.to_filter_order(X), **ordered))
+
+
+def check_named_lengths(**arrays):
+    """Refuse per-row arguments of different numbers of rows, naming the first and every
+    one whose rows differ from its (``None`` values are left out)."""
+    lengths = {name: _n_rows(a) for name, a in arrays.items() if a is not None}
+    if len(set(lengths.values())) > 1:
+        first, rows = next(iter(lengths.items()))
+        named = {first: rows, **{name: n for name, n in lengths.items() if n != rows}}
+        described = ", ".join(f"{name} has {n}" for name, n in named.items())
+        raise ValueError(f"inconsistent numbers of samples: {described}")
+
+
+def _n_rows(values):
+    shape = getattr(values, "shape", None)
+    if shape is None and not hasattr(values, "__len__"):  # array-like by __array__ alone
+        shape = np.asarray(values).shape
+    if shape is not None:
+        return int(shape[0]) if len(shape) else 1
+    return len(values)
 
 
 def _recordings_in_id_order(groups, time):
@@ -357,6 +483,10 @@ def _check_agree(given, from_index, name, where):
         )
 
 
+@validate_params(
+    {"frame": [pd.DataFrame], "recording": [Hashable], "time": [Hashable, None]},
+    prefer_skip_nested_validation=True,
+)
 def to_panel(frame, *, recording=RECORDING, time=TIME):
     """The panel form of a tidy frame: recording ids (as text) and time moved into the index.
 
@@ -388,8 +518,6 @@ def to_panel(frame, *, recording=RECORDING, time=TIME):
     >>> to_panel(frame).index.tolist()
     [('7', 0.0), ('7', 0.05)]
     """
-    if not isinstance(frame, pd.DataFrame):
-        raise TypeError(f"to_panel takes a pandas DataFrame, got {type(frame).__name__}")
     if recording not in frame.columns:
         raise ValueError(f"the frame has no recording column {recording!r}")
     columns = {recording: RECORDING}

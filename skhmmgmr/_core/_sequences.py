@@ -178,3 +178,20 @@ def check_time_order(time, recordings, n_samples):
             f"at row {row} ({time[row - 1]} then {time[row]}); rows of a recording must be "
             "in time order"
         )
+
+
+def median_time_step(time, groups=None):
+    """The sampling period of recordings read from their time stamps: the median step in
+    seconds between consecutive rows of the same recording (``groups``, one recording id per
+    row, recordings contiguous and in time order; ``None``: one recording), missing times
+    left out; ``None`` when no two rows of a recording have a time.
+
+    The one inference of the sampling period, shared by the command line and the torque
+    pipeline's velocity filter (``SteeringFeatures.sampling_period_``).
+    """
+    steps = np.diff(np.asarray(time, dtype=float))
+    if groups is not None:
+        codes = pd.factorize(np.asarray(groups), sort=False, use_na_sentinel=False)[0]
+        steps = steps[codes[1:] == codes[:-1]]
+    steps = steps[~np.isnan(steps)]
+    return float(np.median(steps)) if steps.size else None

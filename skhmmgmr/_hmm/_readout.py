@@ -7,6 +7,12 @@ in ``predict``, :class:`~skhmmgmr.FilterStream` and the generated C. The decay `
 ``[0, 1)`` is ``exp(-1 / tau)`` for a time constant ``tau`` in rows; ``a = 0`` is the GMR
 estimate itself.
 
+"auto" (:func:`weakest_decay`) chooses the weakest read-out whose estimate of the training
+recordings is no rougher than the measured outputs; none when the estimate already is, or
+when that read-out would change nothing that matters (:func:`changes_little`): the estimate's
+roughness by less than 1 % and no recording's accuracy by 0.1 percentage point. A model
+without a read-out is written in format version 2, which older releases read.
+
 Roughness is the thesis' smoothness measure (:func:`skhmmgmr.metrics.smoothness_score`), the
 standard deviation of the difference between consecutive rows per recording, averaged over
 recordings: a sampling period scales it, so comparing two series needs none.
@@ -25,6 +31,11 @@ _DECAY_TOLERANCE = 1e-6
 #: considers, and about the longest whose decay single precision (the C export's float32)
 #: still tells from one (a float just below one is 6e-8 from it).
 MAX_TIME_CONSTANT = 1e6
+#: What a read-out must change to matter, on the training recordings: the accuracy of a
+#: recording by this many percentage points, or the roughness of the estimate by this share.
+#: "auto" keeps no read-out that changes neither (:func:`changes_little`).
+NEGLIGIBLE_ACCURACY_CHANGE = 0.1
+NEGLIGIBLE_ROUGHNESS_CHANGE = 0.01
 
 
 def decay_of(time_constant):
@@ -100,8 +111,9 @@ def roughness(values, recordings):
 def weakest_decay(estimates, targets, recordings):
     """Per output, the smallest decay whose read-out of ``estimates`` is no rougher than
     ``targets`` on ``recordings`` (both (n_samples, n_outputs), filter order): 0 when the
-    estimates already are, or when the targets' roughness cannot be measured. Found by
-    bisection: the roughness of a first-order low-pass falls as its decay grows (its gain
+    estimates already are, when the targets' roughness cannot be measured, or when that
+    read-out changes nothing that matters (:func:`changes_little`). Found by bisection: the
+    roughness of a first-order low-pass falls as its decay grows (its gain
     ``(1 - a) / |1 - a e^{-iw}|`` falls at every frequency)."""
     decays = np.zeros(estimates.shape[1])
     for j in range(estimates.shape[1]):
@@ -124,8 +136,38 @@ def weakest_decay(estimates, targets, recordings):
         while high - low > _DECAY_TOLERANCE:
             middle = 0.5 * (low + high)
             low, high = (middle, high) if too_rough(middle) else (low, middle)
-        decays[j] = high
+        if not changes_little(estimates[:, j], targets[:, j], recordings, high):
+            decays[j] = high
     return decays
+
+
+def changes_little(estimate, target, recordings, decay):
+    """Whether the read-out of decay ``decay`` changes nothing that matters in the estimate
+    of one output (1-D, filter order) against its measured ``target``: it lowers the
+    estimate's roughness by less than :data:`NEGLIGIBLE_ROUGHNESS_CHANGE` (1 %), and in every
+    recording whose target varies it moves the estimate by less than
+    :data:`NEGLIGIBLE_ACCURACY_CHANGE` percent (0.1 %) of the target's standard deviation
+    (root mean square), so that no recording's accuracy ``(1 - RMSE / SD) * 100`` moves by
+    0.1 point (the RMSE moves by at most that root mean square). ``False`` when no recording
+    can say so."""
+    smoothed = smooth_outputs(estimate[:, np.newaxis], recordings, [decay])[:, 0]
+    before = roughness(estimate, recordings)
+    if not roughness(smoothed, recordings) > (1.0 - NEGLIGIBLE_ROUGHNESS_CHANGE) * before:
+        return False
+    change = smoothed - estimate
+    measured = False
+    for _, rows in recordings.slices():
+        observed = np.isfinite(target[rows]) & np.isfinite(change[rows])
+        if np.count_nonzero(observed) < 2:
+            continue
+        spread = np.std(target[rows][observed])
+        if not spread > 0:
+            continue
+        moved = math.sqrt(np.mean(change[rows][observed] ** 2))
+        if moved * 100.0 >= NEGLIGIBLE_ACCURACY_CHANGE * spread:
+            return False
+        measured = True
+    return measured
 
 
 def ahead_weights(transmat, decay, steps):

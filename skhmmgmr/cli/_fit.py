@@ -12,6 +12,7 @@ import inspect
 import pandas as pd
 
 from .._core._schema import EXPERIMENT_COLUMNS, META_COLUMNS
+from .._core._sequences import median_time_step
 from ..datasets import TIME
 from ._files import (
     CommandError,
@@ -89,13 +90,13 @@ def _torque_defaults():
 
 def _sampling_period(frame, args):
     """Seconds between two rows: ``--sampling-period``, else the median time step of the
-    recordings (``None`` without a time column)."""
+    recordings, as the torque pipeline reads it from a time index (``None`` without a time
+    column)."""
     if args.sampling_period is not None:  # checked when parsed
         return args.sampling_period
     if args.time == NO_TIME:
         return None
-    step = frame.groupby(args.recording, sort=False)[args.time].diff().median()
-    return None if pd.isna(step) else float(step)
+    return median_time_step(frame[args.time], frame[args.recording])
 
 
 def _model_to_fit(args, period):

@@ -7,11 +7,12 @@ model's range are refused (:mod:`skhmmgmr._hmm._holds`)."""
 
 import warnings
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._core._panel import align_target, read_layout
+from .._core._panel import in_filter_order, read_layout
 from .._core._validation import (
     check_finite,
     check_target_finite,
@@ -76,9 +77,14 @@ def read_joint_inputs(estimator, X, y, groups, time, *, fitting):
             estimator.output_names_ = np.asarray(names_of_y, dtype=object)
         elif hasattr(estimator, "output_names_"):
             del estimator.output_names_
-    layout = read_layout(X, groups, time, canonical=fitting)
-    y = align_target(X, y, layout)
-    X, y, groups = layout.to_filter_order(X), layout.to_filter_order(y), layout.groups
+    run = partial(_joint_inputs_in_filter_order, estimator, fitting=fitting, names_of_y=names_of_y)
+    return in_filter_order(run, X, groups, time=time, y=y, canonical=fitting)
+
+
+def _joint_inputs_in_filter_order(estimator, layout, X, y=None, *, fitting, names_of_y):
+    """:func:`read_joint_inputs` of rows in filter order, their recordings' ``layout``
+    (``names_of_y``: the outputs' names, :func:`target_names`)."""
+    groups = layout.groups
     allow_nan = estimator.missing_values != "error"
     check_target_finite(y, layout, allow_nan=allow_nan)
     X, y = validate_joint(estimator, X, y, allow_nan=allow_nan, reset=fitting)

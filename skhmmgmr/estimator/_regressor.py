@@ -105,10 +105,13 @@ class HMMGMRRegressor(
         ``fit`` chooses, per output, the weakest read-out whose estimate of the training
         recordings is no rougher than the measured output there (the thesis' smoothness,
         :func:`~skhmmgmr.metrics.smoothness_score`); none when the GMR estimate already is
-        not. None or 0: the GMR estimate itself (the thesis' model). At most 1e6 rows, the
-        longest "auto" considers (single precision, as in the C export's float32, could not
-        tell a longer one's decay from one). ``return_std`` gives the model's predictive
-        standard deviation either way. See the user guide, "Smooth by design".
+        not, or when that read-out changes nothing that matters: the estimate's roughness by
+        less than 1 % and no training recording's accuracy by 0.1 percentage point (a model
+        without a read-out keeps model file format version 2). None or 0: the GMR estimate
+        itself (the thesis' model). At most 1e6 rows, the longest "auto" considers (single
+        precision, as in the C export's float32, could not tell a longer one's decay from
+        one). ``return_std`` gives the model's predictive standard deviation either way. See
+        the user guide, "Smooth by design".
     min_log_density : float or None, default=None
         The outlier policy, the same in ``predict``, :class:`~skhmmgmr.FilterStream` and the
         generated C code (:func:`skhmmgmr.export.write_c`). None: no sample is held; the

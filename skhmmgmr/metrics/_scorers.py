@@ -2,6 +2,7 @@
 
 import inspect
 import warnings
+from functools import partial
 
 import numpy as np
 from sklearn.utils.metadata_routing import UNCHANGED, MetadataRequest, get_routing_for_object
@@ -13,7 +14,7 @@ from .._core._compat import (
     validate_params,
 )
 from .._core._docstrings import fill_shared_parameters
-from .._core._panel import read_layout, recordings_of
+from .._core._panel import in_filter_order, recordings_of
 from .._core._pickled import PickleVersionMixin
 from ._table import (
     PREDICT_MODE,
@@ -165,8 +166,11 @@ class _RecordingScorer(PickleVersionMixin, _MetadataRequester):
         # Read once and handed to predict and the metrics. Recordings in the index are
         # scored in filter order, whatever order the caller (a resampling search, a
         # permutation) put the rows in.
-        layout = read_layout(X, groups)
-        X, y_true = layout.to_filter_order(X), layout.to_filter_order(y_true)
+        run = partial(self._score_in_filter_order, estimator)
+        return in_filter_order(run, X, groups, rows={"y_true": y_true})
+
+    def _score_in_filter_order(self, estimator, layout, X, y_true):
+        """The score of the rows ``X`` and ``y_true`` in filter order, their ``layout`` read."""
         groups, index_time = layout.handed_down(), layout.time
         sampling_period, time = None, None
         if self._needs_sampling:

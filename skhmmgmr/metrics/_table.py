@@ -9,7 +9,7 @@ import pandas as pd
 from sklearn.utils.validation import check_array
 
 from .._core._compat import FiniteInterval, StrOptions
-from .._core._panel import recordings_of
+from .._core._panel import check_named_lengths, in_filter_order
 from .._core._validation import binary_unit, check_sampling_period, constant_to_round_off
 
 # Constraints of the parameters the metric functions, the scorers and the searches share
@@ -21,21 +21,6 @@ MULTIOUTPUT = [StrOptions({"raw_values", "uniform_average"}), "array-like"]
 PREDICT_MODE = [StrOptions({"auto", "groups", "per_recording"})]
 # One trade-off ("70/30" or a pair of weights) or a list of them.
 TRADE_OFFS = [str, list, tuple]
-
-
-def check_named_lengths(**arrays):
-    """Raise a ValueError naming the arrays whose numbers of samples differ."""
-    lengths = {name: _num_samples(a) for name, a in arrays.items() if a is not None}
-    if len(set(lengths.values())) > 1:
-        described = ", ".join(f"{name} has {n}" for name, n in lengths.items())
-        raise ValueError(f"inconsistent numbers of samples: {described}")
-
-
-def _num_samples(array):
-    shape = getattr(array, "shape", None)
-    if shape is not None:
-        return int(shape[0]) if len(shape) else 1
-    return len(array)
 
 
 def as_2d_target(y, name):
@@ -110,11 +95,30 @@ def recording_metrics(
 ):
     """Compute RMSE, accuracy and smoothness per recording and output.
 
-    ``y_true`` may be None when only the smoothness is wanted. The arrays are returned with
-    shape (n_recordings, n_outputs).
+    ``y_true`` may be None when only the smoothness is wanted. The recordings come from
+    ``groups``, else from the ``recording`` level of the index of ``y_true`` (of ``y_pred``
+    when ``y_true`` is no pandas object) as every scorer reads them: a panel
+    (:func:`skhmmgmr.datasets.to_panel`), whose rows may come in any order, the other array
+    paired by position; its ``time`` level gives the time steps when neither
+    ``sampling_period`` nor ``time`` is given. The arrays are returned with shape
+    (n_recordings, n_outputs), the recordings in order of first appearance.
     """
-    arrays = {"y_true": y_true, "y_pred": y_pred, "groups": groups, "time": time}
-    check_named_lengths(**arrays)
+    check_named_lengths(y_true=y_true, y_pred=y_pred, groups=groups, time=time)
+    rows = y_true if isinstance(y_true, pd.Series | pd.DataFrame) else y_pred
+
+    def in_order(layout, _, y_true, y_pred):
+        steps = layout.time if time is not None or sampling_period is None else None
+        return _recording_metrics(
+            y_true, y_pred, layout, sampling_period, steps, accuracy=accuracy, smoothness=smoothness
+        )
+
+    return in_filter_order(
+        in_order, rows, groups, time=time, rows={"y_true": y_true, "y_pred": y_pred}
+    )
+
+
+def _recording_metrics(y_true, y_pred, layout, sampling_period, time, *, accuracy, smoothness):
+    """:func:`recording_metrics` of rows in filter order, their ``layout`` read."""
     y_pred = as_2d_target(y_pred, "y_pred")
     n_samples, n_outputs = y_pred.shape
     if accuracy:
@@ -123,7 +127,7 @@ def recording_metrics(
             raise ValueError(f"y_true has {y_true.shape[1]} output(s) but y_pred has {n_outputs}")
     if smoothness:
         sampling_period, time = check_sampling(sampling_period, time, n_samples)
-    recordings = recordings_of(groups, n_samples, time=time, min_length=2 if smoothness else 1)
+    recordings = layout.recordings(n_samples, min_length=2 if smoothness else 1)
 
     n_rec = len(recordings)
     rmse = np.empty((n_rec, n_outputs)) if accuracy else None

@@ -122,16 +122,16 @@ class DerivedInputs:
         (within 1 %), as the step's own transform does."""
         if self.decay is None or time is None:
             return
-        check_time_steps(np.asarray(time, dtype=float), as_recordings(groups, len(time)), self)
+        recordings = as_recordings(groups, len(time))
+        check_time_steps(np.asarray(time, dtype=float), recordings, self.sampling_period)
 
     def __repr__(self):
         return f"DerivedInputs({self.n_features_in} -> {self.n_features_out} inputs)"
 
 
-def check_time_steps(time, recordings, step):
-    """Refuse a time level whose median step in a recording is not the ``sampling_period`` of
-    ``step`` (within 1 %): the velocity filter's time constant would be off by their ratio."""
-    period = step.sampling_period
+def check_time_steps(time, recordings, period):
+    """Refuse a time level whose median step in a recording is not the sampling period
+    ``period`` (within 1 %): the velocity filter's time constant would be off by their ratio."""
     for rec, start, stop in zip(recordings.ids, recordings.starts, recordings.stops, strict=True):
         if stop - start < 2:
             continue

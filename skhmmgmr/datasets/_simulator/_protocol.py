@@ -11,7 +11,7 @@ from sklearn.utils import check_random_state
 from ..._core._compat import FiniteInterval, Interval, validate_params
 from .._frame import concat_frames
 from ._driver import DRIVER_STYLES
-from ._lane_keeping import cached, human_run
+from ._lane_keeping import CACHE, cached, human_run
 from ._section import SectionSpec
 
 TRAIN_SETTINGS = (1, 2, 3, 4, 5, 6)
@@ -41,12 +41,24 @@ def _sections(n_train_per_setting, n_validation, n_test):
 
 @validate_params(
     {
+        "drivers": [str, "array-like"],
         "n_train_per_setting": _COUNT,
         "n_validation": _COUNT,
         "n_test": _COUNT,
+        "random_state": ["random_state"],
         "n_jobs": [Integral, None],
+        "cache": CACHE,
         "perturbed_share": [FiniteInterval(Real, 0, 1, closed="both")],
-    },
+    }
+    | SectionSpec.constraints(
+        "duration",
+        "sampling_rate",
+        "speed_kmh",
+        "scenario",
+        "sensor_noise",
+        "vehicle",
+        "perturbation",
+    ),
     prefer_skip_nested_validation=False,
 )
 def make_driving_protocol(

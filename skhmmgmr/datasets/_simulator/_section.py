@@ -91,7 +91,7 @@ class SectionSpec:
 
     def __post_init__(self, caller):
         validate_parameter_constraints(
-            {f.name: f.metadata["constraints"] for f in fields(self)},
+            self.constraints(),
             {f.name: getattr(self, f.name) for f in fields(self)},
             caller_name=caller,
         )
@@ -105,6 +105,14 @@ class SectionSpec:
         self._check_size()
         if self.perturbation:  # the multisine's periods must fit in the section
             multisine_frequencies(self.n_samples / self.sampling_rate)
+
+    @classmethod
+    def constraints(cls, *names):
+        """scikit-learn's constraints of the fields (those of ``names``, or all), for the
+        ``validate_params`` of a public function that takes them."""
+        return {
+            f.name: f.metadata["constraints"] for f in fields(cls) if f.name in names or not names
+        }
 
     @classmethod
     def of(cls, arguments, caller, **given):

@@ -1,0 +1,135 @@
+"""The derived inputs of a power-assisted steering system: what they are, their names and
+units, computed on whole recordings.
+
+The driver torque balances, through the power assist, the steering system's load: the
+self-aligning torque of the front tyres, the wheel's inertia and damping, and Coulomb friction.
+Two parts of that balance are not linear in any sensed input, and a mixture of local linear
+regressions gated by Gaussians can follow them only with many states:
+
+- **friction** switches sign with the steering-wheel velocity over a few hundredths of a radian
+  per second: ``tanh(steering_wheel_velocity / friction_velocity)`` (:func:`friction_input`,
+  named ``steering_friction``);
+- **the steering load is compressed**: the boost curve of an electric power assist grows with
+  the torque (the driver's share of a large load is smaller), and the tyres' aligning torque
+  saturates with slip. Odd powers of the load's proxies (the steering-wheel angle and the lateral
+  acceleration: ``x |x|`` and ``x^3``) are the first terms of any smooth odd curve
+  (:func:`load_inputs`, named ``<column>_signed_square``, ``<column>_cube``...).
+
+At high sampling rates the measured velocity is noisy at the scale of the friction band; a
+causal first-order filter (:func:`low_pass`, restarted at every recording by
+:func:`filtered_velocity`) keeps that noise out of the friction input. The stream
+(``skhmmgmr/streaming/_derived.py``) and the generated C compute the same inputs one sample
+at a time.
+"""
+
+import math
+import numbers
+
+import numpy as np
+from scipy.signal import lfilter
+
+from ..streaming._derived import check_time_steps
+
+#: The name of the friction input.
+FRICTION_NAME = "steering_friction"
+
+
+def friction_input(velocity, friction_velocity):
+    """The friction input ``tanh(velocity / friction_velocity)`` of every row."""
+    return np.tanh(velocity / friction_velocity)
+
+
+def power_name(column, power):
+    """The name of the signed power ``power`` of the load column ``column``."""
+    label = f"x{column}" if isinstance(column, numbers.Integral) else str(column)
+    if power == 2:
+        return f"{label}_signed_square"
+    if power == 3:
+        return f"{label}_cube"
+    return f"{label}_signed_power{power}"
+
+
+def load_inputs(values, positions, load_columns, powers):
+    """The signed powers ``sign(x) |x|^p`` of the load columns of ``values`` (a 2-D array,
+    the columns at ``positions[column]``), by name, every power of a column in turn."""
+    derived = {}
+    for column in load_columns:
+        x = values[:, positions[column]]
+        for power in powers:
+            derived[power_name(column, power)] = np.sign(x) * np.abs(x) ** power
+    return derived
+
+
+def derived_names(friction, load_columns, powers):
+    """The names of the derived inputs, in their order: the friction input (with
+    ``friction``), then the signed powers of every load column."""
+    names = [FRICTION_NAME] if friction else []
+    names += [power_name(column, power) for column in load_columns for power in powers]
+    return names
+
+
+def derived_units(units, friction, load_columns, powers):
+    """The units of the input columns (a mapping of names to units, or ``None``) with those of
+    the derived inputs added: 1 for the friction input, ``(unit)^p`` for the power ``p`` of a
+    column with a unit; ``None`` without units."""
+    if not isinstance(units, dict):
+        return None
+    units = dict(units)
+    if friction:
+        units[FRICTION_NAME] = "1"
+    for column in load_columns:
+        unit = units.get(column)
+        for power in powers:
+            name = power_name(column, power)
+            if unit is None:
+                units.pop(name, None)
+            else:
+                units[name] = f"({unit})^{power}"
+    return units
+
+
+def filter_decay(sampling_period, time_constant):
+    """The velocity filter's factor per row, ``exp(-sampling_period / time_constant)``."""
+    return math.exp(-sampling_period / time_constant)
+
+
+def low_pass(values, decay):
+    """One recording through the causal first-order filter ``y_t = decay y_(t-1) + (1 - decay)
+    x_t``, started at its first observed value (``y = x`` there).
+
+    A missing value (NaN) gives NaN and leaves the filter's state alone; the next observed
+    value ``x`` after ``g`` missing ones is taken in over the ``g + 1`` periods since the last
+    observed one, ``y = decay^(g+1) y_last + (1 - decay^(g+1)) x`` (the filter's exact answer to
+    ``x`` held over that time), so that a missing sample never spreads.
+    """
+    filtered = np.full(len(values), np.nan)
+    observed = np.flatnonzero(~np.isnan(values))
+    if not observed.size:
+        return filtered
+    # runs of consecutive observed rows
+    breaks = np.flatnonzero(np.diff(observed) > 1) + 1
+    last = last_row = None
+    for run in np.split(observed, breaks):
+        x = values[run[0] : run[-1] + 1]
+        if last is None:  # the recording's first observed value: y = x
+            start = decay * x[0]
+        else:  # after a gap of g missing rows, as above; the lfilter adds (1 - decay) x[0]
+            lapse = decay ** (run[0] - last_row)
+            start = lapse * last + (decay - lapse) * x[0]
+        filtered[run[0] : run[-1] + 1] = lfilter([1.0 - decay], [1.0, -decay], x, zi=[start])[0]
+        last, last_row = filtered[run[-1]], run[-1]
+    return filtered
+
+
+def filtered_velocity(velocity, layout, sampling_period, time_constant):
+    """The velocity of rows in filter order (their recordings' ``layout``) through the
+    velocity filter of time constant ``time_constant``, restarted at every recording; a time
+    level that steps otherwise than ``sampling_period`` is refused, naming the recording."""
+    recordings = layout.recordings(len(velocity))
+    if layout.time is not None:
+        check_time_steps(np.asarray(layout.time, dtype=float), recordings, sampling_period)
+    decay = filter_decay(sampling_period, time_constant)
+    filtered = np.empty_like(velocity)
+    for start, stop in zip(recordings.starts, recordings.stops, strict=True):
+        filtered[start:stop] = low_pass(velocity[start:stop], decay)
+    return filtered

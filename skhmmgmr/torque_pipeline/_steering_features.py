@@ -1,0 +1,508 @@
+"""``SteeringFeatures``: the derived inputs of a power-assisted steering system as a
+scikit-learn transformer.
+
+Each derived input (``_derived_inputs.py``: the friction input and the signed powers of the
+load's proxies) is an ordinary named column: the transformer appends them to a data frame, so
+the selection framework keeps or drops them like any other feature. Its only learned settings
+are the ``"auto"`` ones, chosen in ``fit`` by ``_friction_search.py``, and the sampling
+period of the velocity filter, read from the time index of the training recordings when it
+is not given.
+"""
+
+import numbers
+
+import numpy as np
+import pandas as pd
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils.validation import check_is_fitted, validate_data
+
+from .._core._compat import Interval, StrOptions, _fit_context, validate_parameter_constraints
+from .._core._docstrings import fill_shared_parameters
+from .._core._panel import in_filter_order
+from .._core._pickled import PickleVersionMixin
+from .._core._sequences import median_time_step
+from ._derived_inputs import (
+    FRICTION_NAME,
+    derived_names,
+    derived_units,
+    filter_decay,
+    filtered_velocity,
+    friction_input,
+    load_inputs,
+)
+from ._friction_search import AUTO, friction_search, search_candidates
+
+
+@fill_shared_parameters
+class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
+    """Append the friction and load-compression inputs of a power-assisted steering system.
+
+    Only the ``"auto"`` settings are learned: ``fit`` chooses the friction band and the
+    velocity filter on the target by a grouped inner validation (see ``friction_search_``
+    and the user guide). Without a velocity filter the transform is row by row, so it is
+    causal and streams: the same row always gives the same derived inputs. With it, the
+    friction input reads the velocity through a causal first-order filter that restarts at
+    every recording (the recordings come from ``groups`` or from the index of a panel,
+    :func:`skhmmgmr.datasets.to_panel`; without either, the rows form one recording in time
+    order). Missing values (NaN) stay missing.
+
+    Parameters
+    ----------
+    friction_velocity : float, "auto" or None, default=0.1
+        Steering-wheel velocity [rad/s] over which Coulomb friction changes sign; the derived
+        input ``steering_friction`` is ``tanh(velocity / friction_velocity)``. ``"auto"``: the
+        band of 0.025, 0.05, 0.1, 0.2, 0.4 and 0.8 rad/s (``FRICTION_CANDIDATES``) of least
+        held-out error, chosen in ``fit`` (which then needs ``y``). ``None`` adds no friction input.
+    friction_column : str or int, default="steering_wheel_velocity"
+        The column holding the steering-wheel velocity (a name, or a position for arrays).
+    load_columns : tuple of str or int, default=("steering_wheel_angle", "lateral_acceleration")
+        Proxies of the steering load whose odd powers are appended.
+    powers : tuple of int, default=(2, 3)
+        Powers ``p >= 2`` appended for each load column as ``sign(x) |x|^p``, named
+        ``<column>_signed_square`` (2), ``<column>_cube`` (3) or ``<column>_signed_power<p>``.
+    velocity_filter : float, "auto" or None, default=None
+        Time constant [s] of a causal first-order low-pass filter on the velocity before the
+        friction input (0.02 s suits 100 Hz sensors; at 20 Hz it changes little). ``None``
+        filters nothing. A time constant needs the sampling period (``sampling_period``, or
+        the time index of the training rows). ``"auto"``: none, 0.02 or 0.05 s
+        (``FILTER_CANDIDATES``), chosen in ``fit`` with the friction band (no filter without
+        a sampling period). The filter starts at the first observed
+        velocity of each recording (its output equals it there); a missing velocity gives a
+        missing friction input and leaves the filter's state alone, and the next observed
+        velocity is taken in over the whole time since the last one.
+    {sampling_period}
+        ``None``: read in ``fit`` from the ``time`` level of the index of ``X`` (a panel) when
+        a velocity filter needs it, as the median step between consecutive rows of a
+        recording (the command line infers it alike); without a time level a filter is not
+        considered.
+
+    Attributes
+    ----------
+    friction_velocity_ : float or None
+        The friction band the transform uses: ``friction_velocity``, or the one chosen.
+    velocity_filter_ : float or None
+        The velocity filter's time constant the transform uses (``None``: no filter).
+    sampling_period_ : float or None
+        The seconds between two rows the velocity filter uses: ``sampling_period``, or the
+        one read from the time index in ``fit`` (``None``: unknown).
+    friction_search_ : DataFrame or None
+        The ``"auto"`` choice: one row per candidate, with ``friction_velocity``,
+        ``velocity_filter``, ``validation_rmse`` (held-out root mean squared error of the
+        linear fit, in the target's unit) and ``chosen``; ``None`` without an ``"auto"``
+        setting.
+    n_features_in_ : int
+        Number of input columns.
+    feature_names_in_ : ndarray of shape (n_features,)
+        Input column names, when fitted on a data frame whose column names are all strings.
+
+    See Also
+    --------
+    make_torque_pipeline : These inputs in front of :class:`~skhmmgmr.HMMGMRRegressor`.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from skhmmgmr import SteeringFeatures
+    >>> X = pd.DataFrame({"steering_wheel_angle": [0.1, -0.2],
+    ...                   "steering_wheel_velocity": [0.0, 0.5],
+    ...                   "lateral_acceleration": [1.0, -2.0]})
+    >>> derived = SteeringFeatures().fit_transform(X)
+    >>> list(derived.columns[3:])  # doctest: +NORMALIZE_WHITESPACE
+    ['steering_friction', 'steering_wheel_angle_signed_square', 'steering_wheel_angle_cube',
+     'lateral_acceleration_signed_square', 'lateral_acceleration_cube']
+    >>> derived["lateral_acceleration_signed_square"].tolist()
+    [1.0, -4.0]
+
+    With ``"auto"`` (the default of :func:`make_torque_pipeline`) ``fit`` chooses them on the
+    torque:
+
+    >>> from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping
+    >>> data = make_lane_keeping(60.0, sampling_rate=20.0, random_state=0)
+    >>> step = SteeringFeatures(friction_velocity="auto", velocity_filter="auto")
+    >>> step = step.fit(data[list(FEATURE_NAMES)], data["driver_torque"])
+    >>> step.friction_velocity_, step.velocity_filter_
+    (0.1, None)
+    """
+
+    _parameter_constraints = {
+        "friction_velocity": [
+            Interval(numbers.Real, 0, None, closed="neither"),
+            StrOptions({AUTO}),
+            None,
+        ],
+        "friction_column": [str, Interval(numbers.Integral, 0, None, closed="left")],
+        "load_columns": [tuple, list],
+        "powers": [tuple, list],
+        "velocity_filter": [
+            Interval(numbers.Real, 0, None, closed="neither"),
+            StrOptions({AUTO}),
+            None,
+        ],
+        "sampling_period": [Interval(numbers.Real, 0, None, closed="neither"), None],
+    }
+
+    def __init__(
+        self,
+        friction_velocity=0.1,
+        friction_column="steering_wheel_velocity",
+        load_columns=("steering_wheel_angle", "lateral_acceleration"),
+        powers=(2, 3),
+        velocity_filter=None,
+        sampling_period=None,
+    ):
+        self.friction_velocity = friction_velocity
+        self.friction_column = friction_column
+        self.load_columns = load_columns
+        self.powers = powers
+        self.velocity_filter = velocity_filter
+        self.sampling_period = sampling_period
+
+    __metadata_request__fit = {"groups": True}
+    __metadata_request__transform = {"groups": True}
+
+    def __setstate__(self, state):
+        # a step pickled before sampling_period_ existed filtered with sampling_period
+        if "n_features_in_" in state and "sampling_period_" not in state:
+            state = {**state, "sampling_period_": state.get("sampling_period")}
+        super().__setstate__(state)
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, X, y=None, groups=None):
+        """Check that ``X`` holds the named columns; choose the ``"auto"`` settings.
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_features)
+            Sensed inputs. Columns are found by name in a data frame, by position in an array.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs), default=None
+            The target (the driver torque); needed by an ``"auto"`` setting, ignored
+            otherwise.
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row: the folds of the ``"auto"`` choice are whole
+            recordings, and the velocity filter restarts at each. ``None``: the index's
+            recording level if any, else one recording.
+
+        Returns
+        -------
+        self : SteeringFeatures
+            The fitted transformer.
+        """
+        self._check_parameters()
+        values = validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
+        self._check_inputs()
+        self.friction_velocity_ = self.friction_velocity
+        self.velocity_filter_ = None if self.friction_velocity is None else self.velocity_filter
+        self.sampling_period_ = self.sampling_period
+        self.friction_search_ = None
+        searched = AUTO in (self.friction_velocity_, self.velocity_filter_)
+        if searched and y is None:
+            raise ValueError(
+                f"{self._settings()}: an 'auto' setting is chosen on the target, so fit needs "
+                "y (the torque)."
+            )
+        needs_period = self.velocity_filter_ is not None and self.sampling_period is None
+        if searched or needs_period:
+            target = y if searched else None
+            in_filter_order(self._fit_in_filter_order, X, groups, y=target, rows={"values": values})
+        return self
+
+    def _fit_in_filter_order(self, layout, X, values, y=None):
+        """The learned settings from rows in filter order and their recordings' ``layout``:
+        the sampling period (when a filter needs it), then the ``"auto"`` choice."""
+        if self.velocity_filter_ is not None and self.sampling_period_ is None:
+            if layout.time is not None:
+                layout.recordings(len(values))  # the time checked to increase first
+                self.sampling_period_ = median_time_step(layout.time, layout.groups)
+            if self.velocity_filter_ != AUTO and self.sampling_period_ is None:
+                raise ValueError(
+                    f"velocity_filter={self.velocity_filter!r} needs sampling_period (the "
+                    "seconds between two rows), or X with a 'time' index level to read it "
+                    "from; got sampling_period=None."
+                )
+        if AUTO not in (self.friction_velocity_, self.velocity_filter_):
+            return
+        self.friction_search_ = self._search(layout, values, y)
+        chosen = self.friction_search_[self.friction_search_["chosen"]].iloc[0]
+        self.friction_velocity_ = float(chosen["friction_velocity"])
+        self.velocity_filter_ = chosen["velocity_filter"]
+        if self.velocity_filter_ is not None:
+            self.velocity_filter_ = float(self.velocity_filter_)
+
+    def _search(self, layout, values, y):
+        """The table of the ``"auto"`` choice on rows in filter order: every candidate's
+        validation RMSE (``_friction_search.py``)."""
+        target = np.asarray(y, dtype=float).reshape(len(values), -1)
+        positions = self._sources()
+        loads = load_inputs(values, positions, self.load_columns, self.powers)
+        velocity = values[:, positions[self.friction_column]]
+        velocities = {None: velocity}
+
+        def friction_of(band, time_constant):
+            if time_constant not in velocities:
+                velocities[time_constant] = filtered_velocity(
+                    velocity, layout, self.sampling_period_, time_constant
+                )
+            return friction_input(velocities[time_constant], band)
+
+        candidates = search_candidates(
+            self.friction_velocity, self.velocity_filter, self.sampling_period_
+        )
+        return friction_search(
+            np.column_stack([values, *loads.values()]),
+            target,
+            layout.recordings(len(values)),
+            candidates,
+            friction_of,
+            self._settings(),
+        )
+
+    def _settings(self):
+        """The settings searched, as the errors name them."""
+        return (
+            f"friction_velocity={self.friction_velocity!r}, "
+            f"velocity_filter={self.velocity_filter!r}"
+        )
+
+    def _check_parameters(self):
+        """What the parameters' constraints cannot say: the powers and the load columns."""
+        for power in self.powers:
+            if not isinstance(power, numbers.Integral) or isinstance(power, bool) or power < 2:
+                raise ValueError(
+                    f"powers must hold integers >= 2 (1 is the input itself); got {power!r} "
+                    f"in powers={self.powers!r}."
+                )
+        if len(set(self.powers)) != len(self.powers):
+            raise ValueError(f"powers={self.powers!r} repeats a power.")
+        if len(set(self.load_columns)) != len(self.load_columns):
+            raise ValueError(f"load_columns={self.load_columns!r} repeats a column.")
+
+    def _check_inputs(self):
+        """The fitted inputs hold the source columns and none of the derived ones."""
+        self._sources()
+        inputs = [str(name) for name in getattr(self, "feature_names_in_", ())]
+        taken = [name for name in self._derived_names() if name in inputs]
+        if taken:
+            raise ValueError(
+                f"X already has the column(s) {taken}, which SteeringFeatures derives: rename "
+                "them, or leave their source out (friction_velocity=None for the friction "
+                "input, load_columns or powers for the others)."
+            )
+
+    def fit_transform(self, X, y=None, groups=None):
+        """Fit, then append the derived inputs (see :meth:`transform`).
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_features)
+            Sensed inputs.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs), default=None
+            The target, for an ``"auto"`` setting (see :meth:`fit`).
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row, for ``velocity_filter`` and the ``"auto"`` choice.
+
+        Returns
+        -------
+        X_out : DataFrame or ndarray of shape (n_samples, n_features)
+            See :meth:`transform`.
+        """
+        return self.fit(X, y, groups=groups).transform(X, groups=groups)
+
+    def transform(self, X, groups=None):
+        """Append the derived inputs.
+
+        Parameters
+        ----------
+        X : DataFrame or array-like of shape (n_samples, n_features)
+            The columns seen in :meth:`fit`.
+        groups : array-like of shape (n_samples,), default=None
+            Recording id of every row, for ``velocity_filter`` (the filter restarts at every
+            recording; the rows of a recording contiguous and in time order, unless the
+            index of a panel orders them). ``None``: the index's recording level if any,
+            else one recording.
+
+        Returns
+        -------
+        X_out : DataFrame or ndarray of shape (n_samples, n_features)
+            ``X`` followed by the derived inputs (``n_features`` is the number of input
+            columns plus the number of derived inputs); a data frame keeps its index (the
+            recordings of a panel) and its ``attrs``, with the units of the derived inputs
+            added to ``attrs["units"]`` when the source columns have units there.
+        """
+        check_is_fitted(self, "n_features_in_")
+        # a frame keeps its columns when they are names (strings), as scikit-learn reads them
+        named = isinstance(X, pd.DataFrame) and hasattr(self, "feature_names_in_")
+        frame = X if named else None
+        values = validate_data(self, X, ensure_all_finite="allow-nan", reset=False)
+        positions = self._sources()
+        derived = {}
+        if self.friction_velocity is not None:
+            velocity = values[:, positions[self.friction_column]]
+            if self.velocity_filter_ is not None:
+                velocity = in_filter_order(
+                    self._filter_in_filter_order, X, groups, rows={"velocity": velocity}
+                )
+            derived[FRICTION_NAME] = friction_input(velocity, self.friction_velocity_)
+        derived.update(load_inputs(values, positions, self.load_columns, self.powers))
+        if frame is None:
+            return np.column_stack([values, *derived.values()])
+        out = pd.DataFrame(derived, index=frame.index)
+        out = pd.concat([frame, out], axis=1)
+        units = derived_units(
+            frame.attrs.get("units"),
+            self.friction_velocity is not None,
+            self.load_columns,
+            self.powers,
+        )
+        out.attrs = {**frame.attrs, "units": units}
+        if units is None:
+            del out.attrs["units"]
+        return out
+
+    def _filter_in_filter_order(self, layout, X, velocity):
+        """The velocity of rows in filter order through the fitted velocity filter."""
+        return filtered_velocity(velocity, layout, self.sampling_period_, self.velocity_filter_)
+
+    def get_feature_names_out(self, input_features=None):
+        """Input names followed by the derived inputs' names.
+
+        Parameters
+        ----------
+        input_features : array-like of str or None, default=None
+            Input names; ``None`` means ``feature_names_in_`` (or ``x0``, ``x1``, ...).
+
+        Returns
+        -------
+        feature_names_out : ndarray of str objects
+            Output column names.
+        """
+        check_is_fitted(self, "n_features_in_")
+        if input_features is None:
+            input_features = getattr(
+                self, "feature_names_in_", [f"x{i}" for i in range(self.n_features_in_)]
+            )
+        elif len(input_features) != self.n_features_in_:
+            raise ValueError(
+                f"input_features has {len(input_features)} names; "
+                f"{self.n_features_in_} were seen in fit."
+            )
+        return np.asarray([*input_features, *self._derived_names()], dtype=object)
+
+    def stream_settings(self):
+        """What a sample-by-sample stream of :meth:`transform` needs, as plain values.
+
+        :class:`~skhmmgmr.FilterStream` reads it to stream a fitted pipeline of these steps
+        and the regressor on the sensed rows (``pipeline.filter_stream()``).
+
+        Returns
+        -------
+        settings : dict
+            ``n_features_in`` and ``feature_names_in`` (``None`` without names) of the input
+            rows, ``feature_names_out``; ``friction_position`` (the velocity's position in the
+            row, ``None`` without a friction input), ``friction_velocity``; ``filter_decay``,
+            the velocity filter's factor per row ``exp(-sampling_period / velocity_filter)``
+            (``None`` without the filter), and ``sampling_period`` (``sampling_period_``);
+            ``load_positions`` (the load columns' positions) and ``powers``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from skhmmgmr import SteeringFeatures
+        >>> step = SteeringFeatures(friction_column=2, load_columns=(0,), powers=(3,),
+        ...                         velocity_filter=0.02, sampling_period=0.01)
+        >>> settings = step.fit(np.zeros((5, 3))).stream_settings()
+        >>> settings["friction_position"], settings["load_positions"], settings["feature_names_out"]
+        (2, [0], ['x0', 'x1', 'x2', 'steering_friction', 'x0_cube'])
+        >>> round(settings["filter_decay"], 4)  # exp(-0.01 / 0.02)
+        0.6065
+        """
+        check_is_fitted(self, "n_features_in_")
+        positions = self._sources()
+        names = getattr(self, "feature_names_in_", None)
+        friction = self.friction_velocity is not None
+        filtered = friction and self.velocity_filter_ is not None
+        return {
+            "n_features_in": int(self.n_features_in_),
+            "feature_names_in": None if names is None else [str(name) for name in names],
+            "feature_names_out": [str(name) for name in self.get_feature_names_out()],
+            "friction_position": positions[self.friction_column] if friction else None,
+            "friction_velocity": float(self.friction_velocity_) if friction else None,
+            "filter_decay": (
+                filter_decay(self.sampling_period_, self.velocity_filter_) if filtered else None
+            ),
+            "sampling_period": None
+            if self.sampling_period_ is None
+            else float(self.sampling_period_),
+            "load_positions": [positions[column] for column in self.load_columns],
+            "powers": [int(power) for power in self.powers],
+        }
+
+    def _derived_names(self):
+        return derived_names(self.friction_velocity is not None, self.load_columns, self.powers)
+
+    def _sources(self):
+        """Position of every source column, with an error naming the missing ones."""
+        needed = list(self.load_columns)
+        if self.friction_velocity is not None:
+            needed.insert(0, self.friction_column)
+        names = getattr(self, "feature_names_in_", None)
+        positions, missing = {}, []
+        for column in needed:
+            if isinstance(column, str):
+                if names is None or column not in names:
+                    missing.append(column)
+                else:
+                    positions[column] = int(np.flatnonzero(names == column)[0])
+            elif isinstance(column, numbers.Integral) and not isinstance(column, bool):
+                if column >= self.n_features_in_:
+                    missing.append(column)
+                positions[column] = int(column)
+            else:
+                raise TypeError(f"columns are names or positions; got {column!r}.")
+        if missing:
+            where = (
+                "X has no column names (pass a DataFrame, or positions for an array)"
+                if names is None
+                else f"X has columns {list(names)}"
+            )
+            raise ValueError(
+                f"SteeringFeatures needs the column(s) {missing} (friction_column / "
+                f"load_columns); {where}."
+            )
+        return positions
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.allow_nan = True
+        tags.requires_fit = True
+        return tags
+
+
+def restore_steering_features(params, n_features_in, feature_names_in=None):
+    """A fitted :class:`SteeringFeatures` from its parameters and fitted facts (a step of the
+    portable model file), refused as ``fit`` would refuse them."""
+    step = SteeringFeatures(**params)
+    validate_parameter_constraints(
+        SteeringFeatures._parameter_constraints,
+        step.get_params(deep=False),
+        caller_name="SteeringFeatures",
+    )
+    step._check_parameters()
+    for name in ("friction_velocity", "velocity_filter"):
+        if params.get(name) == AUTO:
+            raise ValueError(
+                f"{name}='auto' is a setting to fit; a fitted step holds the chosen value."
+            )
+    if step.velocity_filter is not None and step.sampling_period is None:
+        raise ValueError(
+            f"velocity_filter={step.velocity_filter!r} needs sampling_period (the seconds "
+            "between two rows); got sampling_period=None."
+        )
+    step.friction_velocity_ = step.friction_velocity
+    step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
+    step.sampling_period_ = step.sampling_period
+    step.friction_search_ = None
+    step.n_features_in_ = n_features_in
+    if feature_names_in is not None:
+        step.feature_names_in_ = np.asarray(feature_names_in, dtype=object)
+    step._check_inputs()
+    return step
