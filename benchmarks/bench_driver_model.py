@@ -3,7 +3,8 @@
 For every driver style, sampling rate, car and seed, the style's protocol
 (``make_driving_protocol``: 12 training sections of 60 s on the settings 1-6, 6 test sections
 of 60 s on setting 7, measured sensors) is simulated twice with the same seeds: as it is, and
-with a perturbation experiment in every training recording (``perturbation=0.1`` Nm RMS, a
+with a perturbation experiment in a third of the training recordings (``perturbation=0.2`` Nm
+RMS, ``perturbed_share=1/3``, the 3rd, 6th, 9th and 12th section; a
 multisine on the steering wheel that the driver does not know). Fitted:
 
 - ``driver``: ``make_driver_model()`` (one state, the default ``perturbation_penalty``) on
@@ -94,9 +95,9 @@ def _parse(argv=None):
     parser.add_argument("--settings", nargs="+", type=int, default=list(range(1, 8)))
     parser.add_argument("--duration", type=float, default=120.0, help="drive length [s]")
     parser.add_argument("--train-duration", type=float, default=60.0, help="sections [s]")
-    parser.add_argument("--perturbation", type=float, default=0.1, help="RMS [Nm]")
+    parser.add_argument("--perturbation", type=float, default=0.2, help="RMS [Nm]")
     parser.add_argument(
-        "--share", type=float, default=1.0, help="share of the training recordings perturbed"
+        "--share", type=float, default=1 / 3, help="share of the training recordings perturbed"
     )
     parser.add_argument("--penalty", type=float, default=DEFAULT_PERTURBATION_PENALTY)
     parser.add_argument("--models", nargs="+", default=list(MODELS))

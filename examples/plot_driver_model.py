@@ -6,8 +6,8 @@ A model of the driver's torque fitted on ordinary recordings learns mostly the s
 system's inverse: it estimates recorded torque well and, put at the wheel, weaves through
 the lane. :func:`~skhmmgmr.make_driver_model` is fitted instead on recordings with a
 perturbation experiment: a small torque on the steering wheel that the driver does not know
-(here 0.1 Nm RMS, a multisine over 0.05-5 Hz), which shows what part of the wheel's motion
-the driver did not cause.
+(here 0.2 Nm RMS, a multisine over 0.05-5 Hz, in a third of the training recordings), which
+shows what part of the wheel's motion the driver did not cause.
 
 Here, for a defensive driver at 100 Hz: the torque pipeline fitted on the ordinary
 recordings and the driver model fitted on the same recordings with the perturbation, their
@@ -38,12 +38,14 @@ protocol = dict(
 
 # %%
 # The same protocol twice, same seeds: as recorded, and with the perturbation experiment in
-# every training recording (``steering_perturbation``, the torque it applied; the test
-# recordings are never perturbed). The driver model reads
+# a third of the training recordings (``steering_perturbation``, the torque it applied, 0 in
+# the others; the test recordings are never perturbed). The driver model reads
 # :data:`~skhmmgmr.datasets.DRIVER_MODEL_FEATURES`: every sensed feature but the steering
 # wheel's acceleration.
 plain = make_driving_protocol(("defensive",), **protocol)
-perturbed = make_driving_protocol(("defensive",), perturbation=0.1, **protocol)
+perturbed = make_driving_protocol(
+    ("defensive",), perturbation=0.2, perturbed_share=1 / 3, **protocol
+)
 train, train_p = plain[plain["split"] == "train"], perturbed[perturbed["split"] == "train"]
 test = plain[plain["split"] == "test"]
 

@@ -15,7 +15,7 @@ from ._pipeline import TorquePipeline, _n_rows, check_regressor_params, make_tor
 
 #: ``perturbation_penalty`` of :func:`make_driver_model` by default, measured by
 #: ``benchmarks/bench_driver_model.py`` (the frontier of accuracy and driving).
-DEFAULT_PERTURBATION_PENALTY = 1.5
+DEFAULT_PERTURBATION_PENALTY = 1.0
 
 
 class DriverModel(TorquePipeline):
@@ -48,7 +48,7 @@ class DriverModel(TorquePipeline):
     steps : list of (str, estimator) tuples
         As for :class:`~sklearn.pipeline.Pipeline` (``SteeringFeatures`` steps then the
         regressor, as :func:`make_driver_model` builds them).
-    perturbation_penalty : float >= 0, default=1.5
+    perturbation_penalty : float >= 0, default=1.0
         The trade-off: how much ``fit`` keeps the estimate from following the perturbation's
         push on the wheel (see above), in multiples of the perturbation. 0: the plain fit of
         the recordings.
@@ -188,15 +188,16 @@ def make_driver_model(
         derived inputs) drives most steadily and, on the perturbed recordings, estimates as
         well as three: on the simulator, three states estimated 0.2-1.3 points worse and left
         the road more often (``benchmarks/bench_driver_model.py``).
-    perturbation_penalty : float >= 0, default=1.5
+    perturbation_penalty : float >= 0, default=1.0
         The trade-off between the open-loop accuracy and the driving: how much ``fit`` keeps
         the estimate from following the perturbation's push on the wheel (see
         :class:`DriverModel`), in multiples of the perturbation. 0: the plain fit of the
         perturbed recordings. The default is the smallest value at which the model kept
         control on every held-out road of the simulator's three styles at 20 and 100 Hz,
-        trained with a 0.1 Nm perturbation in every training recording (the frontier and
-        the targets are in the user guide's "The driver model at the wheel"); choose it for
-        your data with :func:`skhmmgmr.selection.make_closed_loop_scorer`.
+        trained with a 0.2 Nm perturbation in a third of the training recordings (the
+        frontier and the targets are in the user guide's "The driver model at the wheel");
+        the simulator's novice needed more, its aggressive driver less. Choose it for your
+        data with :func:`skhmmgmr.selection.make_closed_loop_scorer`.
     friction_velocity, friction_column, load_columns, powers, velocity_filter
         Passed to :class:`SteeringFeatures` (see :func:`make_torque_pipeline`). The load's
         signed square only (``powers=(2,)``): a cube makes the torque grow without bound
@@ -226,14 +227,15 @@ def make_driver_model(
     >>> from skhmmgmr.datasets import DRIVER_MODEL_FEATURES, make_driving_protocol
     >>> data = make_driving_protocol(("defensive",), n_train_per_setting=1, n_validation=0,
     ...                              n_test=1, duration=30.0, sampling_rate=20.0,
-    ...                              random_state=0, perturbation=0.1)
+    ...                              random_state=0, perturbation=0.2,
+    ...                              perturbed_share=1 / 3)
     >>> train, test = data[data["split"] == "train"], data[data["split"] == "test"]
     >>> features = list(DRIVER_MODEL_FEATURES)
     >>> model = make_driver_model(sampling_period=0.05, random_state=0).fit(
     ...     train[features], train["driver_torque"], groups=train["recording"],
     ...     perturbation=train["steering_perturbation"])
-    >>> round(model.perturbation_rms_, 3), model.perturbed_share_
-    (0.1, 1.0)
+    >>> round(model.perturbation_rms_, 3), round(model.perturbed_share_, 3)
+    (0.2, 0.333)
     >>> model.predict(test[features], groups=test["recording"]).shape
     (600,)
     """
