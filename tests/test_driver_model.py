@@ -169,6 +169,9 @@ def test_stream_model_file_and_horizon_need_no_perturbation(model, protocol, tmp
     test = protocol[protocol["split"] == "test"]
     expected, std = model.predict(test[FEATURES], groups=test["recording"], return_std=True)
     assert np.all(std > 0)
+    y = test["driver_torque"].to_numpy()
+    r2 = 1 - np.sum((y - expected) ** 2) / np.sum((y - y.mean()) ** 2)
+    assert model.score(test[FEATURES], y, groups=test["recording"]) == pytest.approx(r2)
     stream = model.filter_stream()
     assert_allclose([stream.update(r) for r in test[FEATURES].to_numpy()], expected, atol=1e-12)
     portable.save(model, tmp_path / "driver.json")

@@ -34,12 +34,12 @@ FILTER_WHY = {
     ),
 }
 
-# The checks that fit the estimator: all of them fail when fit cannot run on the checks' data.
 # scikit-learn's own expected failures of a Pipeline
 PIPELINE_WHY = dict.fromkeys(
     ("check_dont_overwrite_parameters", "check_estimators_overwrite_params"),
     "a scikit-learn Pipeline fits the estimators of its steps parameter in place.",
 )
+# The checks that fit the estimator: all of them fail when fit cannot run on the checks' data.
 FIT_CHECKS = (
     "check_dict_unchanged",
     "check_dont_overwrite_parameters",
