@@ -48,7 +48,17 @@ _STATE_COLUMNS = [LOG_COLUMNS.index(name) for name in INITIAL_COLUMNS]
         "return_proba": ["boolean"],
         "recording": [str, None],
     }
-    | SectionSpec.constraints(),
+    | SectionSpec.constraints(  # every field but the perturbation, which a rollout never has
+        "duration",
+        "setting",
+        "speed_kmh",
+        "sampling_rate",
+        "scenario",
+        "random_state",
+        "road_random_state",
+        "sensor_noise",
+        "vehicle",
+    ),
     prefer_skip_nested_validation=False,
 )
 def torque_ahead(
