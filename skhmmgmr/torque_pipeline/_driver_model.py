@@ -196,8 +196,9 @@ def make_driver_model(
         control on every held-out road of the simulator's three styles at 20 and 100 Hz,
         trained with a 0.2 Nm perturbation in a third of the training recordings (the
         frontier and the targets are in the user guide's "The driver model at the wheel");
-        the simulator's novice needed more, its aggressive driver less. Choose it for your
-        data with :func:`skhmmgmr.selection.make_closed_loop_scorer`.
+        the simulator's novice needed more, its aggressive driver less, and an experiment
+        with 0.1 Nm in every training recording 1.5-2. Choose it for your experiment and
+        driver with :func:`skhmmgmr.selection.make_closed_loop_scorer`.
     friction_velocity, friction_column, load_columns, powers, velocity_filter
         Passed to :class:`SteeringFeatures` (see :func:`make_torque_pipeline`). The load's
         signed square only (``powers=(2,)``): a cube makes the torque grow without bound
