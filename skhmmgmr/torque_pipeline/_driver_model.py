@@ -9,9 +9,9 @@ import numpy as np
 import pandas as pd
 from sklearn.pipeline import Pipeline
 
-from .._core._compat import Interval
+from .._core._compat import Interval, validate_parameter_constraints
 from .._core._docstrings import fill_shared_parameters
-from ._pipeline import TorquePipeline, _n_rows, check_regressor_params, make_torque_pipeline
+from ._pipeline import TorquePipeline, check_regressor_params, make_torque_pipeline
 
 #: ``perturbation_penalty`` of :func:`make_driver_model` by default, measured by
 #: ``benchmarks/bench_driver_model.py`` (the frontier of accuracy and driving).
@@ -107,7 +107,11 @@ class DriverModel(TorquePipeline):
         -------
         self : DriverModel
         """
-        self._validate_params()
+        validate_parameter_constraints(
+            self._parameter_constraints,
+            self.get_params(deep=False),
+            caller_name=type(self).__name__,
+        )
         penalised = self._penalised_target(y, perturbation)
         return super().fit(X, penalised, groups=groups, **params)
 
@@ -118,7 +122,7 @@ class DriverModel(TorquePipeline):
         if perturbation is None or y is None:
             return y
         torque = np.asarray(perturbation, dtype=float)
-        n_rows = _n_rows(y)
+        n_rows = np.shape(y)[0]
         if torque.ndim != 1 or torque.shape[0] != n_rows:
             raise ValueError(
                 f"perturbation has shape {torque.shape}; fit needs one torque [Nm] per row of "
