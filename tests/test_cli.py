@@ -13,10 +13,6 @@ from skhmmgmr.cli import build_parser, main
 
 pytest.importorskip("matplotlib")
 
-TINY = ["--duration", "6", "--sampling-rate", "10", "--n-top", "2", "--k-max", "2"]
-TINY += ["--trade-off-step", "50", "--n-jobs", "1", "--quiet"]
-FEATURES = ["steering_wheel_angle", "yaw_rate", "lateral_acceleration"]
-
 
 def make_recordings(n_recordings=6, length=80, seed=0, split=True):
     """A tidy CSV-like table: the torque follows f0 and f1."""
@@ -34,17 +30,10 @@ def make_recordings(n_recordings=6, length=80, seed=0, split=True):
     return pd.concat(frames, ignore_index=True)
 
 
-@pytest.fixture(scope="module")
-def demo_dir(tmp_path_factory):
-    output = tmp_path_factory.mktemp("demo") / "report"
-    argv = ["demo", "--drivers", "defensive", "novice", "--features", *FEATURES]
-    assert main([*argv, *TINY, "--output", str(output)]) == 0
-    return output
-
-
 def test_demo_writes_report(demo_dir, capsys):
     names = {p.name for p in demo_dir.iterdir()}
-    for figure in ("estimate", "relevance", "state_selection", "drivers"):
+    figures = ("estimate", "state_selection", "trade_off", "closed_loop", "drivers", "relevance")
+    for figure in figures:
         assert f"{figure}.png" in names
         assert (demo_dir / f"{figure}.png").stat().st_size > 5_000
     for table in ("test_summary", "per_driver", "candidates", "relevance", "states", "bic"):
@@ -55,7 +44,7 @@ def test_demo_writes_report(demo_dir, capsys):
     assert manifest["details"]["seed"] == 0
     assert "simulation" in manifest["timings"]
     page = (demo_dir / "index.html").read_text()
-    assert page.count("data:image/png;base64,") == 4
+    assert page.count("data:image/png;base64,") == len(figures)
     assert page.count("<table") >= 8
     assert "Test set per driver" in page and "defensive" in page and "novice" in page
     per_driver = pd.read_csv(demo_dir / "per_driver.csv")
