@@ -85,6 +85,16 @@ def test_select_on_csv_without_split(tmp_path, capsys):
         or sum(map(int, manifest["details"]["recordings (train/validation/test)"].split("/"))) == 6
     )
     assert (output / "index.html").is_file()
+    # the same page as the demo's: the parts whose columns the recordings lack are named
+    models = pd.read_csv(output / "models.csv")
+    assert list(models["model"]) == ["selected_model", "baseline", "gradient_boosting"]
+    torque_pipeline, driver_model = manifest["notes"][:2]
+    assert "torque pipeline is left out" in torque_pipeline and "steering_wheel_velocity" in (
+        torque_pipeline
+    )
+    assert "driver model is left out" in driver_model and "lateral_deviation_0m" in driver_model
+    assert (output / "selected_model.json").is_file()
+    assert "What to use for what?" in (output / "index.html").read_text()
 
 
 def test_select_errors(tmp_path, capsys):

@@ -499,24 +499,44 @@ def _answers_html(manifest):
 
 
 def _files_html(files):
-    """The saved models: what each file is and the lines of code that load it."""
+    """The saved models, one block per model: its inputs, then every file, what it is and
+    the lines of code that load it."""
     if not files:
         return []
-    parts = ["<h2 id='saved-models'>Saved models</h2><table class='meta'>"]
-    parts.append("<tr><th>file</th><th class='text'>what it is, and how to load it</th></tr>")
+    parts = ["<h2 id='saved-models'>Saved models</h2>"]
+    by_model = {}
     for entry in files:
-        code = entry.get("code")
-        shown = f"<pre>{html.escape(code)}</pre>" if code else ""
-        parts.append(
-            f"<tr><td><code>{html.escape(entry['file'])}</code></td>"
-            f"<td class='text'>{html.escape(entry['caption'])}{shown}</td></tr>"
-        )
-    parts.append("</table>")
+        by_model.setdefault(entry.get("model", entry["name"]), []).append(entry)
+    for entries in by_model.values():
+        first = entries[0]
+        parts.append(f"<h3>{html.escape(first.get('label', first['name']))}</h3>")
+        if first.get("inputs"):
+            inputs = ", ".join(first["inputs"])
+            parts.append(f"<p>Inputs, in this order: {html.escape(inputs)}.</p>")
+        parts.append("<table class='meta'>")
+        for entry in entries:
+            code = entry.get("code")
+            shown = f"<pre>{html.escape(code)}</pre>" if code else ""
+            parts.append(
+                f"<tr><td><code>{html.escape(entry['file'])}</code></td>"
+                f"<td class='text'>{html.escape(entry['caption'])}</td>"
+                f"<td class='text'>{shown}</td></tr>"
+            )
+        parts.append("</table>")
     return parts
+
+
+#: Tables of few rows and many columns, shown transposed (one column per row of the CSV).
+TRANSPOSED = ("lane_keeping",)
 
 
 def _section(output, entry, *, level):
     table = pd.read_csv(output / entry["file"])
+    if entry["name"] in TRANSPOSED:
+        first = table.columns[0]
+        table = table.set_index(first).T.infer_objects()
+        table.columns.name = None
+        table = table.rename_axis("metric").reset_index()
     caption = html.escape(entry["caption"])
     body = _table_html(table, entry["file"])
     # text columns (labels, uses, feature lists) read from the left

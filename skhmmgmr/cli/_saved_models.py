@@ -5,6 +5,7 @@ and the two lines that load it (:func:`save_models`). The FMU needs FMPy's FMI h
 system C compiler: without them it is skipped, and the report says why in one line.
 """
 
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 #: How each kind of file is loaded: two lines, ``{file}`` and ``{key}`` filled in.
@@ -25,15 +26,16 @@ LOADERS = {
 
 
 def _entry(candidate, file, kind, what, period):
-    code = LOADERS[kind].format(file=file, key=candidate.key, period=period)
-    inputs = ", ".join(candidate.features)
+    code = LOADERS[kind].format(file=file, key=candidate.key, period=float(f"{period:.6g}"))
     return {
         "name": f"{candidate.key} ({kind})",
         "file": file,
-        "caption": f"{candidate.label}, {what}; inputs in this order: {inputs}.",
+        "caption": what,
         "code": code,
         "kind": kind,
         "model": candidate.key,
+        "label": candidate.label,
+        "inputs": list(candidate.features),
     }
 
 
@@ -59,13 +61,13 @@ def save_models(candidates, folder, *, sampling_period, notes):
     from ..export import write_c, write_fmu
 
     folder = Path(folder)
-    entries = []
+    saved = [candidate for candidate in candidates if candidate.saved]
     no_fmu = _fmu_unavailable()
     if no_fmu is not None:
         notes.append(f"The FMUs are not written: {no_fmu}.")
-    for candidate in candidates:
-        if not candidate.saved:
-            continue
+    by_model = {}
+    for candidate in saved:
+        entries = by_model[candidate.key] = []
         file = f"{candidate.key}.json"
         portable.save(candidate.model, folder / file, sampling_period=sampling_period)
         what = "portable model file (JSON, read by any language; predict bit for bit)"
@@ -75,9 +77,18 @@ def save_models(candidates, folder, *, sampling_period, notes):
         entries.append(_entry(candidate, source.name, "C source", what, sampling_period))
         header_entry = {"name": f"{candidate.key} (C header)", "file": header.name, "code": ""}
         entries.append({**entries[-1], **header_entry, "caption": f"Header of {source.name}."})
-        if no_fmu is None:
-            file = f"{candidate.key}.fmu"
-            write_fmu(candidate.model, folder / file, sampling_period=sampling_period)
+    if no_fmu is None:
+
+        def fmu(candidate):
+            path = write_fmu(
+                candidate.model, folder / f"{candidate.key}.fmu", sampling_period=sampling_period
+            )
             what = "co-simulation FMU (FMI 2.0) for vehicle simulators, binary for this platform"
-            entries.append(_entry(candidate, file, "FMU", what, sampling_period))
-    return entries
+            by_model[candidate.key].append(
+                _entry(candidate, path.name, "FMU", what, sampling_period)
+            )
+
+        # the C compiler runs in a process of its own: two builds at a time on two cores
+        with ThreadPoolExecutor(max_workers=2) as pool:
+            list(pool.map(fmu, saved))
+    return [entry for entries in by_model.values() for entry in entries]
