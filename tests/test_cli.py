@@ -66,6 +66,10 @@ def test_report_rerenders_from_saved_tables(demo_dir, tmp_path):
 def test_report_errors(tmp_path, capsys):
     assert main(["report", str(tmp_path)]) == 2
     assert "manifest.json" in capsys.readouterr().err
+    recordings = tmp_path / "runs.csv"
+    make_recordings().to_csv(recordings, index=False)
+    assert main(["report", str(recordings)]) == 2
+    assert f"skhmmgmr select {recordings}" in capsys.readouterr().err
 
 
 def test_select_on_csv_without_split(tmp_path, capsys):
@@ -362,3 +366,29 @@ def test_predict_never_replaces_the_users_columns(tmp_path, capsys):
     result = pd.read_csv(tmp_path / "runs_predicted.csv")
     assert (result["estimate"] == 7.0).all()
     assert {"hmm_estimate", "hmm_estimate_std", "hmm_state_0", "hmm_state_1"} <= set(result)
+
+
+def test_every_stage_has_one_line_and_the_loops_inside_count_into_it():
+    import io
+
+    from skhmmgmr._core._progress import progress_bar
+    from skhmmgmr.cli._stages import Stages
+
+    stream = io.StringIO()  # not a terminal: one line per stage, when it ends
+    stages = Stages(stream=stream)
+    with stages.stage("parameter selection"):
+        assert list(progress_bar(range(3), total=3, desc="subsets")) == [0, 1, 2]
+        assert list(progress_bar("ab", total=2, desc="states")) == ["a", "b"]
+    with stages.stage("figures", total=1) as bar:
+        bar.update()
+    lines = stream.getvalue().splitlines()
+    assert [line.split(" (")[0] for line in lines] == [
+        "parameter selection: done, 5/5 steps",
+        "figures: done, 1/1 steps",
+    ]
+    assert set(stages.timings) == {"parameter selection", "figures"}
+    # outside a stage a loop keeps a bar of its own; --quiet shows nothing
+    quiet = io.StringIO()
+    with Stages(quiet=True, stream=quiet).stage("simulation", total=1) as bar:
+        bar.update()
+    assert quiet.getvalue() == ""

@@ -27,7 +27,7 @@ from ._options import (
     option_name,
 )
 from ._saved_models import save_models
-from ._showcase import test_summary as showcase_summary
+from ._showcase import models_table
 from ._stages import Stages
 
 
@@ -98,7 +98,7 @@ def _run_framework(args, data, meta, stages, human=None):
         )
         figures = _figures(report, data, showcase, period)
         bar.update()
-    models = showcase_summary(showcase)
+    models = models_table(showcase)
     tables = {
         "models": models,
         "lane_keeping": showcase.lane_keeping,
@@ -187,7 +187,7 @@ def _figures(report, data, showcase, period):
     from ._showcase_figures import closed_loop_figure, state_selection_figure, trade_off_figure
 
     figures["state_selection"] = state_selection_figure(report)
-    figures["trade_off"] = trade_off_figure(report.candidates, showcase_summary(showcase))
+    figures["trade_off"] = trade_off_figure(report.candidates, models_table(showcase))
     if showcase.drives:
         figures["closed_loop"] = closed_loop_figure(showcase.drives, showcase.lane_keeping)
     order = ["estimate", "state_selection", "trade_off", "closed_loop", "drivers", "relevance"]
@@ -351,6 +351,12 @@ def command_select(args):
 def command_report(args):
     from ._report import render_html
 
+    if Path(args.result_dir).is_file():
+        raise CommandError(
+            f"{args.result_dir} is a file: 'report' re-renders a report folder; to write the "
+            f"report of recordings, run 'skhmmgmr select {args.result_dir}' (with --target, "
+            "--recording and --time naming its columns)"
+        )
     try:
         page = render_html(args.result_dir)
     except (ValueError, OSError) as exc:

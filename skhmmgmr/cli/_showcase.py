@@ -215,7 +215,7 @@ def score_on_test(candidates, test, *, sampling_period):
     return table[["model", "recording", "n_samples", "rmse", "accuracy", "smoothness"]]
 
 
-def test_summary(showcase):
+def models_table(showcase):
     """Mean test metrics of every model, in the report's order, with what each is for."""
     grouped = showcase.test.groupby("model", sort=False)
     means = grouped[["rmse", "accuracy", "smoothness"]].mean()
@@ -280,12 +280,6 @@ def closed_loop(candidates, human, *, sampling_rate, seed):
         lost = frame.attrs.get("lost_control")
         rows.append({"driver": name, **metrics.to_dict(), "lost_control_at": lost})
     return drives, pd.DataFrame(rows)
-
-
-def first_test_recording(test):
-    """Rows of the first test recording (the figures' recording) and its id."""
-    first = test[RECORDING].iloc[0]
-    return test[test[RECORDING] == first], first
 
 
 def split_rows(data):

@@ -90,11 +90,14 @@ def trade_off_figure(candidates, models):
     for row in shown.itertuples(index=False):
         if row.rank == 1 or row.strategy == "Baseline":
             chosen = " (selected)" if row.rank == 1 else ""
+            # the baseline sits at the right edge (the roughest): its label goes to its left
+            right_edge = row.strategy == "Baseline"
             left.annotate(
                 f"{row.name}{chosen}: {row.n_features} features",
                 (row.smoothness, row.accuracy),
-                xytext=(6, 4),
+                xytext=(-8, -12) if right_edge else (6, 4),
                 textcoords="offset points",
+                ha="right" if right_edge else "left",
                 fontsize=8,
             )
     left.legend(fontsize=7, loc="lower right", title="strategy", title_fontsize=7)
