@@ -116,7 +116,7 @@ def _run_framework(args, data, meta, stages, human=None):
         meta["answers"] = _answers(report, data, models, showcase, saved, notes)
         return saved
 
-    # the report's own time is measured up to its writing, which the page shows
+    # the page shows the stages before its own, which ends once the page is written
     timings = {name: value["wall"] for name, value in stages.timings.items()}
     details = {
         **meta.pop("details", {}),
@@ -132,7 +132,8 @@ def _run_framework(args, data, meta, stages, human=None):
         **{f"time: {k} [s]": f"{v:.1f}" for k, v in timings.items()},
         **{f"time: framework, {k} [s]": f"{v:.1f}" for k, v in report.timings.items()},
     }
-    meta.update(details=details, timings=timings, notes=notes, versions=versions())
+    # the stages' wall and CPU seconds (this process only: not joblib's workers)
+    meta.update(details=details, timings=stages.timings, notes=notes, versions=versions())
     with stages.stage("report and saved models", total=1) as bar:
         try:
             page = write_report(
