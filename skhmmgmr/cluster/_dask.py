@@ -228,6 +228,8 @@ def _fit_spread(client, shards, counts, estimator):
 
 
 def _check_supported(estimator):
+    # the checks of ``fit``: fit_on_cluster never calls it
+    estimator._validate_params()
     emission_family(estimator.covariance_type)
     if estimator.init_params == "random":
         raise ValueError(
