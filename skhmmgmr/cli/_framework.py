@@ -164,8 +164,8 @@ def _other_models(args, report, data, period, stages, human):
     and with ``human`` the driver model at the wheel of a held-out road."""
     from ._showcase import closed_loop, run_showcase
 
-    with stages.stage("other models") as bar:
-        showcase = run_showcase(report, data, sampling_period=period, seed=args.seed, bar=bar)
+    with stages.stage("other models"):
+        showcase = run_showcase(report, data, sampling_period=period, seed=args.seed)
     if human is not None and "driver_model" in showcase.candidates:
         with stages.stage("closed loop", total=1) as bar:
             showcase.drives, showcase.lane_keeping = closed_loop(

@@ -22,6 +22,7 @@ import pandas as pd
 from sklearn.base import clone
 from threadpoolctl import threadpool_limits
 
+from .._core._progress import progress_bar
 from .._core._schema import PREVIEW_FEATURES, RECORDING, SPLIT, TARGET, TIME
 
 #: The road of the closed loop: a seed none of the protocol's sections draws (they draw theirs
@@ -234,14 +235,14 @@ def models_table(showcase):
     return pd.DataFrame(rows)
 
 
-def run_showcase(report, data, *, sampling_period, seed, bar):
+def run_showcase(report, data, *, sampling_period, seed):
     """Every model of the report fitted on the training rows and scored on the test rows.
 
-    ``bar`` (a stage of :class:`._stages.Stages`) counts the models as they are fitted.
+    The models beyond the framework's count as the steps of the caller's progress stage
+    (:func:`~skhmmgmr._core._progress.progress_bar`).
     """
     train, test = split_rows(data)
     selected, baseline = framework_candidates(report, train, test)
-    bar.update(detail=selected.key)
     others, notes = other_candidates(
         list(baseline.features),
         data.columns,
@@ -249,11 +250,10 @@ def run_showcase(report, data, *, sampling_period, seed, bar):
         seed=seed,
     )
     candidates = {c.key: c for c in (selected, baseline)}
-    for candidate in others:
+    for candidate in progress_bar(others, total=len(others), desc="models"):
         groups = candidate.key != "gradient_boosting"
         _predict(_fit(candidate, train, groups=groups), test)
         candidates[candidate.key] = candidate
-        bar.update(detail=candidate.key)
     table = score_on_test(candidates, test, sampling_period=sampling_period)
     return Showcase(candidates=candidates, test=table, notes=notes)
 
