@@ -32,7 +32,8 @@ def make_recordings(n_recordings=6, length=80, seed=0, split=True):
 
 def test_demo_writes_report(demo_dir, capsys):
     names = {p.name for p in demo_dir.iterdir()}
-    figures = ("estimate", "state_selection", "trade_off", "closed_loop", "drivers", "relevance")
+    figures = ("estimate", "models_estimate", "state_selection", "trade_off", "closed_loop")
+    figures += ("drivers", "relevance")
     for figure in figures:
         assert f"{figure}.png" in names
         assert (demo_dir / f"{figure}.png").stat().st_size > 5_000

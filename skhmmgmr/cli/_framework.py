@@ -185,13 +185,21 @@ def _figures(report, data, showcase, period):
     figures = report_figures(report, data, sampling_period=period)
     if not figures:
         return figures
-    from ._showcase_figures import closed_loop_figure, state_selection_figure, trade_off_figure
+    from ._showcase_figures import (
+        closed_loop_figure,
+        models_estimate_figure,
+        state_selection_figure,
+        trade_off_figure,
+    )
 
+    models = models_table(showcase)
+    figures["models_estimate"] = models_estimate_figure(showcase.first, models)
     figures["state_selection"] = state_selection_figure(report)
-    figures["trade_off"] = trade_off_figure(report.candidates, models_table(showcase))
+    figures["trade_off"] = trade_off_figure(report.candidates, models)
     if showcase.drives:
         figures["closed_loop"] = closed_loop_figure(showcase.drives, showcase.lane_keeping)
-    order = ["estimate", "state_selection", "trade_off", "closed_loop", "drivers", "relevance"]
+    order = ["estimate", "models_estimate", "state_selection", "trade_off", "closed_loop"]
+    order += ["drivers", "relevance"]
     return {name: figures[name] for name in order if name in figures}
 
 

@@ -88,6 +88,7 @@ FIGURES = {
     "estimate": "Estimated against measured torque on a test recording, with the +-2 std band "
     "and the filtered state probabilities (thesis Fig. C.2): the band should hold the measured "
     "torque, and the states switch where the manoeuvre does",
+    "models_estimate": "Every model's estimate against the measured torque on one test recording",
     "state_selection": "State selection (thesis Fig. 8): mean validation metrics against K, "
     "the 1% rules drawn (the gain of each added state on the performance score), the chosen "
     "K dashed",

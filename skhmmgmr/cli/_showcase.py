@@ -63,6 +63,8 @@ class Showcase:
     candidates: dict
     test: pd.DataFrame
     notes: dict = field(default_factory=dict)
+    #: the first test recording: ``time``, the measured torque and every model's estimate
+    first: pd.DataFrame = None
     drives: dict = field(default_factory=dict)
     lane_keeping: pd.DataFrame = None
 
@@ -255,7 +257,18 @@ def run_showcase(report, data, *, sampling_period, seed):
         _predict(_fit(candidate, train, groups=groups), test)
         candidates[candidate.key] = candidate
     table = score_on_test(candidates, test, sampling_period=sampling_period)
-    return Showcase(candidates=candidates, test=table, notes=notes)
+    rows = (test[RECORDING] == test[RECORDING].iloc[0]).to_numpy()
+    first = pd.DataFrame(
+        {
+            "recording": test[RECORDING].to_numpy()[rows],
+            "time": np.arange(rows.sum()) * sampling_period
+            if TIME not in test
+            else test[TIME].to_numpy()[rows],
+            "measured": test[TARGET].to_numpy()[rows],
+            **{key: c.estimate[rows] for key, c in candidates.items()},
+        }
+    )
+    return Showcase(candidates=candidates, test=table, notes=notes, first=first)
 
 
 def closed_loop(candidates, human, *, sampling_rate, seed):

@@ -155,3 +155,28 @@ def closed_loop_figure(drives, lane_keeping):
         f"Lateral deviation {said}."
     )
     return fig, caption
+
+
+def models_estimate_figure(first, models):
+    """Every model's estimate against the measured torque on the first test recording."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(10, 5))
+    ax.plot(first["time"], first["measured"], color="k", lw=1.6, label="measured")
+    for row in models.itertuples(index=False):
+        if row.model in first:
+            label = f"{row.label}: {row.accuracy:.1f} %"
+            ax.plot(first["time"], first[row.model], lw=0.9, label=label)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("driver torque [Nm]")
+    ax.set_title(f"test recording {first['recording'].iloc[0]}", fontsize="medium")
+    # below the axes: five lines over a torque trace leave no free corner
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    caption = (
+        "Every model's estimate against the measured torque on the same test recording (in the "
+        "legend: each model's mean accuracy over all test recordings): the closer a line "
+        "follows the black one, the more accurate; the flatter its wiggles, the smoother."
+    )
+    return fig, caption
