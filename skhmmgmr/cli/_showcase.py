@@ -257,7 +257,8 @@ def run_showcase(report, data, *, sampling_period, seed):
         _predict(_fit(candidate, train, groups=groups), test)
         candidates[candidate.key] = candidate
     table = score_on_test(candidates, test, sampling_period=sampling_period)
-    rows = (test[RECORDING] == test[RECORDING].iloc[0]).to_numpy()
+    # the recording of the framework's estimate figure: the first test recording of the data
+    rows = (test[RECORDING] == data.loc[data[SPLIT] == "test", RECORDING].iloc[0]).to_numpy()
     first = pd.DataFrame(
         {
             "recording": test[RECORDING].to_numpy()[rows],
