@@ -8,6 +8,7 @@ import pytest
 from sklearn.base import clone
 
 from skhmmgmr import HierarchicalHMMGMRRegressor, HMMGMRRegressor
+from skhmmgmr.estimator._adaptation_choice import candidates, choose, confirm_fresh_fit
 
 
 def _driver(n_recordings, n_rows, seed, slopes=(2.0, -1.0), offset=0.0):
@@ -26,21 +27,17 @@ def generic():
     return HMMGMRRegressor(n_states=2, random_state=0).fit(*_driver(4, 150, 0))
 
 
-def _hand_run(model, X, y, groups, pairs, n_folds=8, n_chunks=10, se_factor=2.0):
-    """The rule of ``adapt``'s "auto", by hand: every recording in eight time blocks, the
-    model adapted by ``adapt`` (or fitted anew by ``fit`` for relevance 0) to seven of them
-    (each block a recording) and scored by ``predict`` on the eighth; the root mean squared
-    error of every chunk; the one-standard-error rule with two standard errors."""
+def _errors(model, X, y, folds, pairs, n_chunks=10):
+    """The root mean squared error of every candidate in every chunk of the held-out rows:
+    each fold ``(adapt_parts, held_parts)`` (lists of row indices, each part a recording),
+    the model adapted by ``adapt`` (or fitted anew by ``fit`` for relevance 0) to the first
+    and scored by ``predict`` on the second, every held-out part cut into ``n_chunks``."""
     scale = model.model_.standardization.output_scale[0]
-    recordings = [np.flatnonzero(groups == g) for g in dict.fromkeys(groups)]
-    blocks = [np.array_split(rows, n_folds) for rows in recordings]
     sums = {pair: [] for pair in pairs}
     counts = []
-    for i in range(n_folds):
-        adapt_parts = [part for parts in blocks for j, part in enumerate(parts) if j != i]
+    for adapt_parts, held_parts in folds:
         adapt_rows = np.concatenate(adapt_parts)
         adapt_groups = np.repeat(np.arange(len(adapt_parts)), [len(p) for p in adapt_parts])
-        held_parts = [parts[i] for parts in blocks]
         held_rows = np.concatenate(held_parts)
         held_groups = np.repeat(np.arange(len(held_parts)), [len(p) for p in held_parts])
         chunks = np.concatenate(
@@ -68,12 +65,50 @@ def _hand_run(model, X, y, groups, pairs, n_folds=8, n_chunks=10, se_factor=2.0)
                 np.bincount(chunks, ((estimate - y[held_rows]) / scale) ** 2)
             )
     counts = np.concatenate(counts)
-    rmse = np.sqrt(np.array([np.concatenate(sums[pair]) for pair in pairs]) / counts)
+    return np.sqrt(np.array([np.concatenate(sums[pair]) for pair in pairs]) / counts)
+
+
+def _paired_t(rmse, than):
+    """The mean of the paired differences over their standard error."""
+    difference = rmse - than
+    return difference.mean() / (np.std(difference, ddof=1) / np.sqrt(difference.size))
+
+
+def _hand_run(model, X, y, groups, pairs, n_folds=8):
+    """The rule of ``adapt``'s "auto", by hand: every recording in eight time blocks, every
+    candidate adapted to seven of them (each block a recording) and scored on the eighth;
+    the one-standard-error rule (two standard errors) among the candidates that keep the
+    model as a prior; then the fresh fit (last) if it is ahead of that choice by half a
+    standard error of their paired chunk differences and, with each recording held out in
+    turn, not behind it by more than one (with a single recording: a score a tenth lower)."""
+    recordings = [np.flatnonzero(groups == g) for g in dict.fromkeys(groups)]
+    blocks = [np.array_split(rows, n_folds) for rows in recordings]
+    folds = [
+        (
+            [part for parts in blocks for j, part in enumerate(parts) if j != i],
+            [parts[i] for parts in blocks],
+        )
+        for i in range(n_folds)
+    ]
+    rmse = _errors(model, X, y, folds, pairs)
     score = rmse.mean(axis=1)
-    se = np.std(rmse, axis=1, ddof=1) / np.sqrt(counts.size)
-    best = np.argmin(score)
-    chosen = next(k for k in range(len(pairs)) if score[k] <= score[best] + se_factor * se[best])
-    return score, se, chosen
+    se = np.std(rmse, axis=1, ddof=1) / np.sqrt(rmse.shape[1])
+    best = np.argmin(score[:-1])
+    chosen = next(k for k in range(len(pairs)) if score[k] <= score[best] + 2.0 * se[best])
+    on_recordings = np.full(len(pairs), np.nan)
+    if _paired_t(rmse[-1], rmse[chosen]) < -0.5:
+        if len(recordings) == 1:
+            fresh = score[-1] <= 0.9 * score[chosen]
+        else:
+            folds = [
+                (recordings[:i] + recordings[i + 1 :], [recordings[i]])
+                for i in range(len(recordings))
+            ]
+            held = _errors(model, X, y, folds, [pairs[chosen], pairs[-1]])
+            on_recordings[[chosen, -1]] = held.mean(axis=1)
+            fresh = _paired_t(held[1], held[0]) < 1.0
+        chosen = len(pairs) - 1 if fresh else chosen
+    return score, se, on_recordings, chosen
 
 
 def test_the_choice_is_that_of_a_hand_run_of_the_same_split(generic):
@@ -84,11 +119,13 @@ def test_the_choice_is_that_of_a_hand_run_of_the_same_split(generic):
     assert pairs[0] == ("", np.inf)
     assert pairs[1:-1] == [("mv", r) for r in RELEVANCES]
     assert pairs[-1] == ("mvt", 0.0)  # a fresh fit
-    score, se, chosen = _hand_run(generic, X, y, groups, pairs)
+    score, se, on_recordings, chosen = _hand_run(generic, X, y, groups, pairs)
     np.testing.assert_allclose(table["validation_rmse"], score, rtol=1e-9)
     np.testing.assert_allclose(table["validation_se"], se, rtol=1e-9)
+    np.testing.assert_allclose(table["recordings_rmse"], on_recordings, rtol=1e-9)
     assert table["chosen"].tolist() == [k == chosen for k in range(len(pairs))]
     assert table["relevance"][chosen] < np.inf  # a driver this far moves the model
+    assert np.isfinite(on_recordings).sum() == 2  # the fresh fit led: held-out recordings ran
     # then the chosen candidate adapts to all the rows
     parameters, relevance = pairs[chosen]
     reference = copy.deepcopy(generic).adapt(
@@ -211,3 +248,47 @@ def test_a_hierarchical_model_cannot_be_fitted_anew_by_adapt():
     model.fit(X, y, groups=groups)
     with pytest.raises(ValueError, match="relevance=0 fits the model anew"):
         model.adapt(X, y, groups=groups, relevance=0.0, parameters="mvt")
+
+
+def _fresh_fit_leading(fresh_ratio):
+    """The table of :func:`choose` on 20 chunks where every candidate that keeps the model as
+    a prior scores the same (so "do not adapt" is chosen) and the fresh fit scores
+    ``fresh_ratio`` times as much in every chunk."""
+    pairs = candidates("auto", "auto")
+    base = 1.0 + 0.1 * np.sin(np.arange(20.0))
+    rmse = np.vstack([np.tile(base, (len(pairs) - 1, 1)), fresh_ratio * base])
+    table, confirm = choose(pairs, rmse**2, np.ones(20))
+    assert table["chosen"].tolist()[0]
+    return table, confirm
+
+
+@pytest.mark.parametrize("ratio, chosen", [(0.91, False), (0.89, True)])
+def test_with_one_recording_the_fresh_fit_needs_a_score_a_tenth_lower(ratio, chosen):
+    table, confirm = _fresh_fit_leading(ratio)
+    assert confirm  # ahead in every chunk: by far more than half a standard error
+    table = confirm_fresh_fit(table)  # a single recording: nothing to hold out
+    assert table["chosen"].tolist()[-1] == chosen and table["chosen"].sum() == 1
+
+
+@pytest.mark.parametrize("behind, chosen", [(0.9, True), (1.1, False)])
+def test_the_fresh_fit_must_not_trail_on_held_out_recordings(behind, chosen):
+    table, _ = _fresh_fit_leading(0.5)
+    # on held-out recordings the fresh fit trails the choice by `behind` standard errors
+    # of the paired differences (+-0.1 around their mean, 20 chunks)
+    spread = 0.1 * np.resize([1.0, -1.0], 20)
+    se = np.std(spread, ddof=1) / np.sqrt(20)
+    held = np.vstack([np.full(20, 1.0), 1.0 + behind * se + spread])
+    table = confirm_fresh_fit(table, held**2, np.ones(20))
+    assert table["chosen"].tolist()[-1] == chosen and table["chosen"].sum() == 1
+    np.testing.assert_allclose(table["recordings_rmse"].iloc[[0, -1]], held.mean(axis=1))
+    assert table["recordings_rmse"].iloc[1:-1].isna().all()
+
+
+def test_a_fresh_fit_within_half_a_standard_error_is_not_considered():
+    pairs = candidates("auto", "auto")
+    base = 1.0 + 0.1 * np.sin(np.arange(20.0))
+    spread = 0.1 * np.resize([1.0, -1.0], 20)
+    se = np.std(spread, ddof=1) / np.sqrt(20)
+    for lead, considered in [(0.4, False), (0.6, True)]:
+        rmse = np.vstack([np.tile(base, (len(pairs) - 1, 1)), base - lead * se + spread])
+        assert choose(pairs, rmse**2, np.ones(20))[1] == considered

@@ -39,7 +39,16 @@ from .._hmm._gmr import causal_filter, gmr_estimates, mix_estimates, read_missin
 from .._hmm._missing import observed_counts
 from .._hmm._readout import ahead_weights, smooth_outputs
 from .._hmm._stale_inputs import stale_noise_for
-from ._adaptation_choice import AUTO, candidates, check_strength, choose, chunk_ids, time_folds
+from ._adaptation_choice import (
+    AUTO,
+    candidates,
+    check_strength,
+    choose,
+    chunk_ids,
+    confirm_fresh_fit,
+    recording_folds,
+    time_folds,
+)
 from ._prediction_inputs import read_inputs, read_joint_inputs
 
 
@@ -124,14 +133,18 @@ class AdaptMixin:
         (``relevance=inf``), for the means and covariances ("mv") at a relevance of 4096,
         1024, 256, 64, 16 and 4, and for a fresh fit of the estimator on the recordings
         alone (``relevance=0``). A candidate's held-out error is the root mean squared error
-        of its estimate in every tenth of a held-out block, averaged; the strongest candidate
-        within two standard errors of the best score is chosen (the one-standard-error
-        rule, towards the fitted model) and then adapts to all the rows; ``adaptation_``
-        keeps the table. A driver like the fitted model's keeps it as it is; one far from it
-        moves it as far as the held-out rows support, up to a model of its own. The choice
-        costs about 55 single adaptations (8 folds of 6 MAP EM runs and a fit, each followed
-        by a prediction): 1-3 s for 1-5 minutes at 20 Hz, K=5, 5 inputs (see
-        :doc:`/user_guide/adaptation`).
+        of its estimate in every tenth of a held-out block, averaged. Among the candidates
+        that keep the fitted model as a prior, the strongest within two standard errors of
+        the best score is chosen (the one-standard-error rule, towards the fitted model). The
+        fresh fit replaces it only on clear evidence: ahead of it by half a standard error
+        of their paired differences on the blocks, and not behind it by more than one with
+        each recording held out in turn (with a single recording: a score a tenth lower).
+        The choice then adapts to all the rows; ``adaptation_`` keeps the table. A driver
+        like the fitted model's keeps it as it is; one far from it moves it as far as the
+        held-out rows support, up to a model of its own. The choice costs about 55 single
+        adaptations (8 folds of 6 MAP EM runs and a fit, each followed by a prediction; two
+        per recording more when the fresh fit leads): 1-4 s for 1-5 minutes at 20 Hz, K=5, 5
+        inputs (see :doc:`/user_guide/adaptation`).
 
         This is not ``partial_fit``: in scikit-learn ``partial_fit`` learns incrementally
         towards the fit of all the data seen so far, whereas ``adapt`` treats the fitted
@@ -181,9 +194,11 @@ class AdaptMixin:
             ``log_likelihood_history_`` of the adaptation (the log-likelihood of the new
             recordings), and ``adaptation_``: the table of the "auto" choice, one row per
             candidate with ``parameters``, ``relevance`` (``inf``: not adapted; ``0``: a
-            fresh fit), ``validation_rmse`` (the held-out error, in units of the output's
-            standard deviation at fit), ``validation_se`` (its standard error) and
-            ``chosen``; None when neither is "auto". After a fresh fit the
+            fresh fit), ``validation_rmse`` (the error on held-out time blocks, in units of
+            the output's standard deviation at fit), ``validation_se`` (its standard
+            error), ``recordings_rmse`` (the error on held-out recordings, for the fresh fit
+            and the choice it was checked against; else NaN) and ``chosen``; None when
+            neither is "auto". After a fresh fit the
             likelihood attributes are the fit's (``penalized_log_likelihood_`` among them).
 
         Examples
@@ -199,7 +214,7 @@ class AdaptMixin:
         True
         >>> choice = model.adapt(X[:200], y[:200] + 0.5).adaptation_  # how far: "auto"
         >>> choice.columns.tolist()
-        ['parameters', 'relevance', 'validation_rmse', 'validation_se', 'chosen']
+        ['parameters', 'relevance', 'validation_rmse', 'validation_se', 'recordings_rmse', 'chosen']
         """
         check_is_fitted(self)
         relevance, parameters = check_strength(relevance, parameters)
@@ -288,11 +303,29 @@ class AdaptMixin:
 
     def _choose_adaptation(self, X, Y, recordings, pairs, n_iter):
         """The table of the "auto" choice among ``pairs`` on the rows ``X, Y`` of
-        ``recordings`` (:mod:`~skhmmgmr.estimator._adaptation_choice`)."""
+        ``recordings`` (:mod:`~skhmmgmr.estimator._adaptation_choice`): every candidate on
+        the time folds, then the choice and the fresh fit on held-out recordings when the
+        fresh fit leads on the time folds."""
+        errors, counts = self._held_out_errors(X, Y, time_folds(recordings), pairs, n_iter)
+        table, confirm = choose(pairs, errors, counts)
+        if not confirm:
+            return table
+        folds = recording_folds(recordings)
+        if not folds:
+            return confirm_fresh_fit(table)
+        chosen = pairs[int(np.flatnonzero(table["chosen"])[0])]
+        errors, counts = self._held_out_errors(X, Y, folds, [chosen, pairs[-1]], n_iter)
+        return confirm_fresh_fit(table, errors, counts)
+
+    def _held_out_errors(self, X, Y, folds, pairs, n_iter):
+        """The sums of squared errors (n_pairs, n_chunks) of every candidate of ``pairs``
+        adapted on each fold's rows, per chunk of its held-out rows (NaN where a candidate
+        could not adapt), and the entries of every chunk; in units of the fitted model's
+        standardised outputs, rows whose target is missing left out."""
         model = self.model_
         prior = model.hmm_parameters()
-        errors, counts = [], []
-        for adapt_rows, adapt_recordings, held_rows, held_recordings in time_folds(recordings):
+        errors, counts = [np.zeros((len(pairs), 0))], [np.zeros(0, dtype=int)]
+        for adapt_rows, adapt_recordings, held_rows, held_recordings in folds:
             held_X, held_Y, chunks = X[held_rows], Y[held_rows], chunk_ids(held_recordings)
             observed = ~np.isnan(held_Y)
             counts.append(np.bincount(chunks, observed.sum(axis=1)))
@@ -324,9 +357,7 @@ class AdaptMixin:
                 error = (estimate - held_Y) / model.standardization.output_scale
                 fold[i] = np.bincount(chunks, np.sum(np.where(observed, error, 0.0) ** 2, axis=1))
             errors.append(fold)
-        if not errors:  # no fold: too few rows to choose from
-            return choose(pairs, np.zeros((len(pairs), 0)), np.zeros(0))
-        return choose(pairs, np.hstack(errors), np.concatenate(counts))
+        return np.hstack(errors), np.concatenate(counts)
 
     def predict_ahead(
         self, X, steps, groups=None, time=None, *, state_output="marginal", return_std=False
