@@ -9,7 +9,7 @@ from skhmmgmr import HMMGMRRegressor, portable
 from skhmmgmr.cli import main
 from skhmmgmr.datasets import make_lane_keeping
 from skhmmgmr.metrics import evaluate_recordings
-from skhmmgmr.torque_pipeline import FRICTION_CANDIDATES, TorquePipeline
+from skhmmgmr.torque_pipeline import WIDTH_GRID, TorquePipeline
 
 pytest.importorskip("pyarrow")
 
@@ -46,8 +46,11 @@ def test_fit_writes_the_torque_pipeline_with_its_options(files):
     pipe, training = portable.load(files["model"], return_training=True)
     assert type(pipe) is TorquePipeline
     features = pipe[0]
-    # the friction band is chosen in fit (the default "auto"); the file holds the chosen one
-    assert features.velocity_filter == 0.1 and features.friction_velocity in FRICTION_CANDIDATES
+    # the friction inputs are chosen in fit (the default "auto"); the file holds the chosen
+    # widths, a run of the grid's
+    assert features.velocity_filter == 0.1 and isinstance(features.friction_velocity, tuple)
+    first = WIDTH_GRID.index(features.friction_velocity[0])
+    assert features.friction_velocity == WIDTH_GRID[first : first + len(features.friction_velocity)]
     assert features.sampling_period == pytest.approx(0.05, rel=1e-12)
     assert training["sampling_period"] == features.sampling_period
     assert training["longest_recording"] == 300

@@ -149,7 +149,8 @@ def test_pipeline_equals_the_regressor_on_the_derived_columns(recordings):
     pipeline.fit(X, y, hmmgmr__groups=groups)
     # the pipeline's regressor reads out the estimate by the "auto" rule (its default)
     by_hand = HMMGMRRegressor(n_states=2, random_state=0, n_iter=20, output_smoothing="auto")
-    derived = SteeringFeatures().fit_transform(X)
+    # the friction inputs the pipeline chose ("auto"), by hand
+    derived = SteeringFeatures(friction_velocity=pipeline[0].friction_velocity_).fit_transform(X)
     by_hand.fit(derived, y, groups=groups)
     np.testing.assert_array_equal(
         pipeline.predict(X, groups=groups), by_hand.predict(derived, groups=groups)

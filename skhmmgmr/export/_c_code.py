@@ -3,7 +3,9 @@ arrays, the derived inputs of a torque pipeline, the log-densities and the state
 
 Every number and every operation is of the filter's arithmetic (``double``, or ``float`` for
 ``dtype="float32"``: ``float`` literals and ``expf``, ``tanhf``, ``powf``, ``fabsf``, so that no
-value is promoted to ``double`` on the way); a signed power ``sign(x) |x|^p`` is a chain of
+value is promoted to ``double`` on the way); the friction inputs are ``tanh(v /
+friction_velocity)`` for one band, ``tanh(v / friction_widths[j])`` for every width of a
+basis, the velocity (filtered or not) read once; a signed power ``sign(x) |x|^p`` is a chain of
 multiplications in single precision up to :data:`CHAINED_POWERS`, ``pow``/``powf`` beyond (and
 for ``p > 2`` in double precision, as :class:`~skhmmgmr.SteeringFeatures` computes it).
 """
@@ -51,8 +53,10 @@ def _named_parameters(spec):
         parts.append(("output_gain", 1.0 - decay, None))
     constants = []
     derived = spec.derived
-    if derived.friction is not None:
-        constants.append(("friction_velocity", derived.friction[1]))
+    if derived.friction is not None and len(derived.friction[1]) == 1:
+        constants.append(("friction_velocity", derived.friction[1][0]))
+    elif derived.friction is not None:
+        parts.append(("friction_widths", np.asarray(derived.friction[1]), "friction basis"))
     if derived.velocity_decay is not None:
         constants.append(("velocity_decay", derived.velocity_decay))
         constants.append(("velocity_gain", 1.0 - derived.velocity_decay))
@@ -97,8 +101,18 @@ def derived_code(spec, dtype):
         velocity = f"inputs[{derived.friction[0]}]"
         if derived.velocity_decay is not None:
             velocity = f"low_pass(state, {velocity})"
-        lines.append(f"    x[{column}] = {tanh}({velocity} / friction_velocity);")
-        column += 1
+        widths = derived.friction[1]
+        if len(widths) == 1:
+            lines.append(f"    x[{column}] = {tanh}({velocity} / friction_velocity);")
+        else:  # a basis: the velocity read once (the filter steps once), every width
+            real = TYPES[dtype]["real"]
+            lines.append(f"    {{\n        const {real} velocity = {velocity};")
+            lines += [
+                f"        x[{column + j}] = {tanh}(velocity / friction_widths[{j}]);"
+                for j in range(len(widths))
+            ]
+            lines.append("    }")
+        column += len(widths)
     for position, power in derived.powers:
         magnitude = _power(f"inputs[{position}]", power, dtype)
         lines.append(f"    x[{column}] = signum(inputs[{position}]) * ({magnitude});")

@@ -4,7 +4,8 @@ The generated code runs what :class:`~skhmmgmr.FilterStream` runs (METHOD.md sec
 parameters written into the source as ``static const`` arrays (:mod:`._c_code`):
 
 1. the derived inputs of a torque pipeline (:class:`~skhmmgmr.SteeringFeatures`): the friction
-   input ``tanh(v / friction_velocity)`` of the velocity, low-pass filtered when the transformer
+   input ``tanh(v / friction_velocity)`` of the velocity (or ``tanh(v / w_j)`` for every width
+   of a friction basis), low-pass filtered when the transformer
    has ``velocity_filter`` (started at the recording's first finite velocity; a non-finite one
    leaves the filter alone and the next is taken in over the whole time since the last, as
    :func:`~skhmmgmr.torque_pipeline.low_pass`), and the signed powers ``sign(x) |x|^p``;

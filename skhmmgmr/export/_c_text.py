@@ -70,11 +70,12 @@ def array(name, dtype, values, comment=None):
 def check_float32(named_values):
     """Refuse, naming it, a value of ``named_values`` ({name: array-like}) that single
     precision cannot hold: beyond ``float``'s range (it would be written as an infinity) or,
-    for a ``*scale`` or ``friction_velocity`` divisor, non-zero but rounding to zero."""
+    for a ``*scale``, ``friction_velocity`` or ``friction_widths`` divisor, non-zero but
+    rounding to zero."""
     for name, values in named_values.items():
         values = np.ravel(np.asarray(values, dtype=float))
         beyond = np.abs(values) > _FLOAT32_MAX
-        if name.endswith("scale") or name == "friction_velocity":
+        if name.endswith("scale") or name in ("friction_velocity", "friction_widths"):
             beyond |= (values != 0) & (values.astype(np.float32) == 0)
         if beyond.any():
             value = float(values[np.flatnonzero(beyond)[0]])

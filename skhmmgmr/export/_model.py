@@ -33,15 +33,17 @@ from sklearn.utils.validation import check_is_fitted
 from .._hmm._holds import check_min_log_density
 from ..estimator import HMMGMRRegressor
 from ..torque_pipeline import SteeringFeatures
+from ..torque_pipeline._derived_inputs import friction_widths
 
 
 @dataclass(frozen=True)
 class DerivedInputs:
     """The inputs :class:`~skhmmgmr.SteeringFeatures` appends, by raw-input position.
 
-    ``friction``: ``(position, friction_velocity)`` or None; ``powers``: ``(position, power)``
-    of every signed power in the transformer's column order; ``velocity_decay``: the decay of
-    the velocity's low-pass filter per sample, or None.
+    ``friction``: ``(position, widths)`` or None, ``widths`` the tuple of the friction inputs'
+    widths (one: a band, several: a basis); ``powers``: ``(position, power)`` of every signed
+    power in the transformer's column order; ``velocity_decay``: the decay of the velocity's
+    low-pass filter per sample, or None.
     """
 
     friction: tuple = None
@@ -50,7 +52,8 @@ class DerivedInputs:
 
     @property
     def n_derived(self):
-        return (self.friction is not None) + len(self.powers)
+        widths = () if self.friction is None else self.friction[1]
+        return len(widths) + len(self.powers)
 
 
 @dataclass(frozen=True)
@@ -160,7 +163,7 @@ def _derived_inputs(features, regressor):
     names = getattr(features, "feature_names_in_", None)
     raw_names = tuple(str(n) for n in names) if names is not None else None
     sources = list(features.load_columns)
-    if features.friction_velocity is not None:
+    if features.friction_velocity_ is not None:
         sources.append(features.friction_column)
     # fit checked that every source column exists
     positions = {
@@ -168,15 +171,16 @@ def _derived_inputs(features, regressor):
         for column in sources
     }
     friction = None
-    if features.friction_velocity is not None:
-        friction = (positions[features.friction_column], float(features.friction_velocity_))
+    if features.friction_velocity_ is not None:
+        widths = friction_widths(features.friction_velocity_)
+        friction = (positions[features.friction_column], widths)
     powers = tuple(
         (positions[column], int(power))
         for column in features.load_columns
         for power in features.powers
     )
     decay = None
-    if features.friction_velocity is not None and features.velocity_filter_ is not None:
+    if features.friction_velocity_ is not None and features.velocity_filter_ is not None:
         decay = math.exp(-features.sampling_period_ / features.velocity_filter_)
     derived = DerivedInputs(friction, powers, decay)
     expected = list(features.get_feature_names_out())

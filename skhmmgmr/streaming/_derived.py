@@ -8,7 +8,8 @@ imports it: a step is read through the plain description it returns, a dict of
 
 ``n_features_in`` (int), ``feature_names_in`` (list of str or None), ``feature_names_out``
 (list of str), ``friction_position`` (int or None: no friction input), ``friction_velocity``
-(float), ``filter_decay`` (float or None: no velocity filter), ``sampling_period`` (float or
+(float: one band; a list of floats: the widths of a basis, one friction input each),
+``filter_decay`` (float or None: no velocity filter), ``sampling_period`` (float or
 None), ``load_positions`` (list of int) and ``powers`` (list of int).
 
 Every step appends its derived inputs to its input row, so the row the regressor reads is the
@@ -64,6 +65,8 @@ class DerivedInputs:
         self.feature_names_out = list(settings["feature_names_out"])
         self.friction = settings["friction_position"]
         self.friction_velocity = settings["friction_velocity"]
+        widths = self.friction_velocity
+        self.widths = tuple(widths) if isinstance(widths, list | tuple) else (widths,)
         self.decay = settings["filter_decay"]
         self.sampling_period = settings["sampling_period"]
         self.loads = tuple(int(p) for p in settings["load_positions"])
@@ -88,7 +91,8 @@ class DerivedInputs:
             velocity = values[self.friction]
             if self.decay is not None:
                 velocity = self.low_pass(velocity)
-            values.append(math.tanh(velocity / self.friction_velocity))
+            for width in self.widths:
+                values.append(math.tanh(velocity / width))
         powers = self.powers
         for position in self.loads:
             x = values[position]

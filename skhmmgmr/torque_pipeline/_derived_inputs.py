@@ -6,9 +6,12 @@ self-aligning torque of the front tyres, the wheel's inertia and damping, and Co
 Two parts of that balance are not linear in any sensed input, and a mixture of local linear
 regressions gated by Gaussians can follow them only with many states:
 
-- **friction** switches sign with the steering-wheel velocity over a few hundredths of a radian
+- **friction** switches sign with the steering-wheel velocity over a band of velocities that
+  differs from one steering system to the next, from a few thousandths to tenths of a radian
   per second: ``tanh(steering_wheel_velocity / friction_velocity)`` (:func:`friction_input`,
-  named ``steering_friction``);
+  named ``steering_friction``), or a basis of several bands at once, ``tanh(v / w_j)`` for the
+  widths ``w_j`` (:func:`friction_inputs`, named ``steering_friction_<w_j>``), whose
+  combination the regression fits: the shape of the friction curve, from the data;
 - **the steering load is compressed**: the boost curve of an electric power assist grows with
   the torque (the driver's share of a large load is smaller), and the tyres' aligning torque
   saturates with slip. Odd powers of the load's proxies (the steering-wheel angle and the lateral
@@ -39,6 +42,33 @@ def friction_input(velocity, friction_velocity):
     return np.tanh(velocity / friction_velocity)
 
 
+def friction_widths(friction):
+    """The widths of the friction inputs of ``friction`` (a ``friction_velocity``: one band, a
+    tuple of widths or None), as a tuple of floats."""
+    if friction is None:
+        return ()
+    if isinstance(friction, tuple | list):
+        return tuple(float(width) for width in friction)
+    return (float(friction),)
+
+
+def friction_names(friction):
+    """The names of the friction inputs of ``friction``: ``steering_friction`` for one band,
+    ``steering_friction_<width>`` (three significant digits) for every width of a basis."""
+    if friction is None:
+        return []
+    if isinstance(friction, tuple | list):
+        return [f"{FRICTION_NAME}_{float(width):.3g}" for width in friction]
+    return [FRICTION_NAME]
+
+
+def friction_inputs(velocity, friction):
+    """The friction inputs of ``friction`` (see :func:`friction_names`) of every row, by name."""
+    names = friction_names(friction)
+    widths = friction_widths(friction)
+    return {name: friction_input(velocity, w) for name, w in zip(names, widths, strict=True)}
+
+
 def power_name(column, power):
     """The name of the signed power ``power`` of the load column ``column``."""
     label = f"x{column}" if isinstance(column, numbers.Integral) else str(column)
@@ -61,22 +91,23 @@ def load_inputs(values, positions, load_columns, powers):
 
 
 def derived_names(friction, load_columns, powers):
-    """The names of the derived inputs, in their order: the friction input (with
-    ``friction``), then the signed powers of every load column."""
-    names = [FRICTION_NAME] if friction else []
+    """The names of the derived inputs, in their order: the friction inputs of ``friction``
+    (a ``friction_velocity``, see :func:`friction_names`), then the signed powers of every
+    load column."""
+    names = friction_names(friction)
     names += [power_name(column, power) for column in load_columns for power in powers]
     return names
 
 
 def derived_units(units, friction, load_columns, powers):
     """The units of the input columns (a mapping of names to units, or ``None``) with those of
-    the derived inputs added: 1 for the friction input, ``(unit)^p`` for the power ``p`` of a
-    column with a unit; ``None`` without units."""
+    the derived inputs added: 1 for the friction inputs of ``friction``, ``(unit)^p`` for the
+    power ``p`` of a column with a unit; ``None`` without units."""
     if not isinstance(units, dict):
         return None
     units = dict(units)
-    if friction:
-        units[FRICTION_NAME] = "1"
+    for name in friction_names(friction):
+        units[name] = "1"
     for column in load_columns:
         unit = units.get(column)
         for power in powers:

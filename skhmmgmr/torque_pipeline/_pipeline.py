@@ -418,9 +418,11 @@ def make_torque_pipeline(
         Number of hidden states of the regressor; choose it on validation recordings
         (:class:`~skhmmgmr.StateSelector`, or a ``GridSearchCV`` over ``hmmgmr__n_states``).
     friction_velocity, load_columns, powers, velocity_filter
-        Passed to :class:`SteeringFeatures`. By default (``"auto"``) the friction band and the
-        velocity filter are chosen in ``fit`` on the training recordings
-        (``pipeline[0].friction_search_``), so that they suit the car; the filter is
+        Passed to :class:`SteeringFeatures`. By default (``"auto"``) the friction inputs (a
+        basis of one or several widths, from the narrowest the velocity resolves to the widest
+        the data needs, or none) and the velocity filter are chosen in ``fit`` on the training
+        recordings (``pipeline[0].friction_search_``), so that they suit the car; a number
+        fixes one band, a tuple of widths a basis. The filter is
         considered only with a sampling period (at 100 Hz it keeps the velocity sensor's
         noise out of the friction input). The recordings reach the transformer through
         ``groups`` given to the pipeline or a panel index.

@@ -4,11 +4,13 @@ scikit-learn transformer.
 Each derived input (``_derived_inputs.py``: the friction input and the signed powers of the
 load's proxies) is an ordinary named column: the transformer appends them to a data frame, so
 the selection framework keeps or drops them like any other feature. Its only learned settings
-are the ``"auto"`` ones, chosen in ``fit`` by ``_friction_search.py``, and the sampling
-period of the velocity filter, read from the time index of the training recordings when it
-is not given.
+are the ``"auto"`` ones (the friction inputs, one band or a basis of several, and the
+velocity filter), chosen in ``fit`` by ``_friction_search.py``, and the sampling period of
+the velocity filter, read from the time index of the training recordings when it is not
+given.
 """
 
+import math
 import numbers
 
 import numpy as np
@@ -22,22 +24,31 @@ from .._core._panel import in_filter_order
 from .._core._pickled import PickleVersionMixin
 from .._core._sequences import median_time_step
 from ._derived_inputs import (
-    FRICTION_NAME,
     derived_names,
     derived_units,
     filter_decay,
     filtered_velocity,
-    friction_input,
+    friction_inputs,
+    friction_names,
+    friction_widths,
     load_inputs,
 )
-from ._friction_search import AUTO, friction_search, search_candidates
+from ._friction_search import (
+    AUTO,
+    WIDTH_GRID,
+    basis_windows,
+    friction_search,
+    search_filters,
+    velocity_ladder,
+)
 
 
 @fill_shared_parameters
 class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     """Append the friction and load-compression inputs of a power-assisted steering system.
 
-    Only the ``"auto"`` settings are learned: ``fit`` chooses the friction band and the
+    Only the ``"auto"`` settings are learned: ``fit`` chooses the friction inputs (no band, one
+    band or a basis of several, their widths read from the velocity's own scale) and the
     velocity filter on the target by a grouped inner validation (see ``friction_search_``
     and the user guide). Without a velocity filter the transform is row by row, so it is
     causal and streams: the same row always gives the same derived inputs. With it, the
@@ -48,11 +59,18 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
 
     Parameters
     ----------
-    friction_velocity : float, "auto" or None, default=0.1
+    friction_velocity : float, tuple of float, "auto" or None, default=0.1
         Steering-wheel velocity [rad/s] over which Coulomb friction changes sign; the derived
-        input ``steering_friction`` is ``tanh(velocity / friction_velocity)``. ``"auto"``: the
-        band of 0.025, 0.05, 0.1, 0.2, 0.4 and 0.8 rad/s (``FRICTION_CANDIDATES``) of least
-        held-out error, chosen in ``fit`` (which then needs ``y``). ``None`` adds no friction input.
+        input ``steering_friction`` is ``tanh(velocity / friction_velocity)``. A tuple of
+        widths ``w_j`` is a basis of friction inputs ``tanh(velocity / w_j)``, named
+        ``steering_friction_<w_j>`` (``w_j`` to three significant digits), whose combination
+        each state's regression fits: a friction curve of any sharpness within the widths.
+        ``"auto"``: chosen in ``fit`` (which then needs ``y``) by the held-out error of a
+        least-squares fit, among no friction input and every run of consecutive widths of a
+        ladder a factor 2 apart, from the narrowest the (filtered) velocity resolves to the
+        widest the data needs (``_friction_search.py``; the fewest inputs within 0.2 % of the
+        least error); one width chosen is the tuple of that width. ``None`` adds no friction
+        input.
     friction_column : str or int, default="steering_wheel_velocity"
         The column holding the steering-wheel velocity (a name, or a position for arrays).
     load_columns : tuple of str or int, default=("steering_wheel_angle", "lateral_acceleration")
@@ -65,8 +83,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         friction input (0.02 s suits 100 Hz sensors; at 20 Hz it changes little). ``None``
         filters nothing. A time constant needs the sampling period (``sampling_period``, or
         the time index of the training rows). ``"auto"``: none, 0.02 or 0.05 s
-        (``FILTER_CANDIDATES``), chosen in ``fit`` with the friction band (no filter without
-        a sampling period). The filter starts at the first observed
+        (``FILTER_CANDIDATES``), chosen in ``fit`` with the friction inputs (no filter without
+        a sampling period; none with no friction input). The filter starts at the first observed
         velocity of each recording (its output equals it there); a missing velocity gives a
         missing friction input and leaves the filter's state alone, and the next observed
         velocity is taken in over the whole time since the last one.
@@ -78,18 +96,19 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
 
     Attributes
     ----------
-    friction_velocity_ : float or None
-        The friction band the transform uses: ``friction_velocity``, or the one chosen.
+    friction_velocity_ : float, tuple of float or None
+        The friction band or basis widths the transform uses: ``friction_velocity``, or the
+        ones chosen (a tuple, ``None`` for no friction input).
     velocity_filter_ : float or None
         The velocity filter's time constant the transform uses (``None``: no filter).
     sampling_period_ : float or None
         The seconds between two rows the velocity filter uses: ``sampling_period``, or the
         one read from the time index in ``fit`` (``None``: unknown).
     friction_search_ : DataFrame or None
-        The ``"auto"`` choice: one row per candidate, with ``friction_velocity``,
-        ``velocity_filter``, ``validation_rmse`` (held-out root mean squared error of the
-        linear fit, in the target's unit) and ``chosen``; ``None`` without an ``"auto"``
-        setting.
+        The ``"auto"`` choice: one row per candidate, with ``friction_velocity`` (a width, a
+        tuple of widths or None), ``velocity_filter``, ``n_friction_inputs``,
+        ``validation_rmse`` (held-out root mean squared error of the linear fit, in the
+        target's unit) and ``chosen``; ``None`` without an ``"auto"`` setting.
     n_features_in_ : int
         Number of input columns.
     feature_names_in_ : ndarray of shape (n_features,)
@@ -113,6 +132,12 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     >>> derived["lateral_acceleration_signed_square"].tolist()
     [1.0, -4.0]
 
+    A basis of friction widths:
+
+    >>> basis = SteeringFeatures(friction_velocity=(0.01, 0.1)).fit_transform(X)
+    >>> list(basis.columns[3:5])
+    ['steering_friction_0.01', 'steering_friction_0.1']
+
     With ``"auto"`` (the default of :func:`make_torque_pipeline`) ``fit`` chooses them on the
     torque:
 
@@ -121,13 +146,15 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     >>> step = SteeringFeatures(friction_velocity="auto", velocity_filter="auto")
     >>> step = step.fit(data[list(FEATURE_NAMES)], data["driver_torque"])
     >>> step.friction_velocity_, step.velocity_filter_
-    (0.1, None)
+    ((0.1,), None)
     """
 
     _parameter_constraints = {
         "friction_velocity": [
             Interval(numbers.Real, 0, None, closed="neither"),
             StrOptions({AUTO}),
+            tuple,
+            list,
             None,
         ],
         "friction_column": [str, Interval(numbers.Integral, 0, None, closed="left")],
@@ -189,8 +216,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         """
         self._check_parameters()
         values = validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
+        self.friction_velocity_ = _as_setting(self.friction_velocity)
         self._check_inputs()
-        self.friction_velocity_ = self.friction_velocity
         self.velocity_filter_ = None if self.friction_velocity is None else self.velocity_filter
         self.sampling_period_ = self.sampling_period
         self.friction_search_ = None
@@ -223,36 +250,39 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             return
         self.friction_search_ = self._search(layout, values, y)
         chosen = self.friction_search_[self.friction_search_["chosen"]].iloc[0]
-        self.friction_velocity_ = float(chosen["friction_velocity"])
+        self.friction_velocity_ = _as_setting(chosen["friction_velocity"])
         self.velocity_filter_ = chosen["velocity_filter"]
-        if self.velocity_filter_ is not None:
+        if self.friction_velocity_ is None:
+            self.velocity_filter_ = None
+        elif self.velocity_filter_ is not None:
             self.velocity_filter_ = float(self.velocity_filter_)
 
     def _search(self, layout, values, y):
         """The table of the ``"auto"`` choice on rows in filter order: every candidate's
-        validation RMSE (``_friction_search.py``)."""
+        validation RMSE (``_friction_search.py``), the ladder of widths of ``"auto"`` read
+        from each filter's velocity."""
         target = np.asarray(y, dtype=float).reshape(len(values), -1)
         positions = self._sources()
         loads = load_inputs(values, positions, self.load_columns, self.powers)
         velocity = values[:, positions[self.friction_column]]
-        velocities = {None: velocity}
-
-        def friction_of(band, time_constant):
-            if time_constant not in velocities:
-                velocities[time_constant] = filtered_velocity(
-                    velocity, layout, self.sampling_period_, time_constant
-                )
-            return friction_input(velocities[time_constant], band)
-
-        candidates = search_candidates(
-            self.friction_velocity, self.velocity_filter, self.sampling_period_
-        )
+        searched = []
+        for time_constant in search_filters(self.velocity_filter, self.sampling_period_):
+            filtered = velocity
+            if time_constant is not None:
+                filtered = filtered_velocity(velocity, layout, self.sampling_period_, time_constant)
+            if self.friction_velocity == AUTO:
+                widths = velocity_ladder(filtered)
+                candidates = basis_windows(widths)
+            else:
+                widths = friction_widths(self.friction_velocity_)
+                candidates = [(self.friction_velocity_, tuple(range(len(widths))))]
+            columns = list(friction_inputs(filtered, widths).values())
+            searched.append((time_constant, columns, candidates))
         return friction_search(
             np.column_stack([values, *loads.values()]),
             target,
             layout.recordings(len(values)),
-            candidates,
-            friction_of,
+            searched,
             self._settings(),
         )
 
@@ -275,6 +305,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             raise ValueError(f"powers={self.powers!r} repeats a power.")
         if len(set(self.load_columns)) != len(self.load_columns):
             raise ValueError(f"load_columns={self.load_columns!r} repeats a column.")
+        if isinstance(self.friction_velocity, tuple | list):
+            _check_widths(self.friction_velocity)
 
     def _check_inputs(self):
         """The fitted inputs hold the source columns and none of the derived ones."""
@@ -333,13 +365,13 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         values = validate_data(self, X, ensure_all_finite="allow-nan", reset=False)
         positions = self._sources()
         derived = {}
-        if self.friction_velocity is not None:
+        if self.friction_velocity_ is not None:
             velocity = values[:, positions[self.friction_column]]
             if self.velocity_filter_ is not None:
                 velocity = in_filter_order(
                     self._filter_in_filter_order, X, groups, rows={"velocity": velocity}
                 )
-            derived[FRICTION_NAME] = friction_input(velocity, self.friction_velocity_)
+            derived.update(friction_inputs(velocity, self.friction_velocity_))
         derived.update(load_inputs(values, positions, self.load_columns, self.powers))
         if frame is None:
             return np.column_stack([values, *derived.values()])
@@ -347,7 +379,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         out = pd.concat([frame, out], axis=1)
         units = derived_units(
             frame.attrs.get("units"),
-            self.friction_velocity is not None,
+            self.friction_velocity_,
             self.load_columns,
             self.powers,
         )
@@ -396,7 +428,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         settings : dict
             ``n_features_in`` and ``feature_names_in`` (``None`` without names) of the input
             rows, ``feature_names_out``; ``friction_position`` (the velocity's position in the
-            row, ``None`` without a friction input), ``friction_velocity``; ``filter_decay``,
+            row, ``None`` without a friction input), ``friction_velocity`` (the band, or the
+            list of a basis' widths, one friction input each); ``filter_decay``,
             the velocity filter's factor per row ``exp(-sampling_period / velocity_filter)``
             (``None`` without the filter), and ``sampling_period`` (``sampling_period_``);
             ``load_positions`` (the load columns' positions) and ``powers``.
@@ -416,14 +449,18 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         check_is_fitted(self, "n_features_in_")
         positions = self._sources()
         names = getattr(self, "feature_names_in_", None)
-        friction = self.friction_velocity is not None
-        filtered = friction and self.velocity_filter_ is not None
+        friction = self.friction_velocity_
+        filtered = friction is not None and self.velocity_filter_ is not None
+        if isinstance(friction, tuple):
+            friction = list(friction_widths(friction))
+        elif friction is not None:
+            friction = float(friction)
         return {
             "n_features_in": int(self.n_features_in_),
             "feature_names_in": None if names is None else [str(name) for name in names],
             "feature_names_out": [str(name) for name in self.get_feature_names_out()],
-            "friction_position": positions[self.friction_column] if friction else None,
-            "friction_velocity": float(self.friction_velocity_) if friction else None,
+            "friction_position": None if friction is None else positions[self.friction_column],
+            "friction_velocity": friction,
             "filter_decay": (
                 filter_decay(self.sampling_period_, self.velocity_filter_) if filtered else None
             ),
@@ -435,7 +472,11 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         }
 
     def _derived_names(self):
-        return derived_names(self.friction_velocity is not None, self.load_columns, self.powers)
+        """The derived inputs' names; before an ``"auto"`` choice, every name it may give."""
+        friction = self.friction_velocity_
+        if isinstance(friction, str):  # "auto": a basis of widths of the grid
+            friction = WIDTH_GRID
+        return derived_names(friction, self.load_columns, self.powers)
 
     def _sources(self):
         """Position of every source column, with an error naming the missing ones."""
@@ -495,7 +536,7 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
             f"velocity_filter={step.velocity_filter!r} needs sampling_period (the seconds "
             "between two rows); got sampling_period=None."
         )
-    step.friction_velocity_ = step.friction_velocity
+    step.friction_velocity_ = _as_setting(step.friction_velocity)
     step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
     step.sampling_period_ = step.sampling_period
     step.friction_search_ = None
@@ -504,3 +545,34 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
         step.feature_names_in_ = np.asarray(feature_names_in, dtype=object)
     step._check_inputs()
     return step
+
+
+def _as_setting(friction):
+    """A ``friction_velocity`` as the fitted step holds it: a basis as a tuple of floats."""
+    if isinstance(friction, tuple | list):
+        return friction_widths(friction)
+    return friction
+
+
+def _check_widths(widths):
+    """Refuse a basis that is empty, holds a width that is not a positive finite number, or
+    two widths of one name."""
+    if not widths:
+        raise ValueError("friction_velocity=() holds no width; give None for no friction input.")
+    for width in widths:
+        if (
+            isinstance(width, bool)
+            or not isinstance(width, numbers.Real)
+            or not math.isfinite(width)
+            or width <= 0
+        ):
+            raise ValueError(
+                f"friction_velocity must hold widths > 0 [rad/s]; got {width!r} in "
+                f"friction_velocity={widths!r}."
+            )
+    names = friction_names(tuple(widths))
+    if len(set(names)) != len(names):
+        raise ValueError(
+            f"friction_velocity={widths!r} repeats a width (to three significant digits, "
+            f"which name the inputs: {names})."
+        )
