@@ -15,7 +15,7 @@ import pytest
 import sklearn
 
 from skhmmgmr import SteeringFeatures, make_torque_pipeline, portable
-from skhmmgmr.datasets import to_panel
+from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping, to_panel
 from skhmmgmr.torque_pipeline import FILTER_CANDIDATES, WIDTH_GRID, low_pass
 from skhmmgmr.torque_pipeline._friction_search import LADDER_QUANTILES, velocity_ladder
 
@@ -134,6 +134,35 @@ def test_sharp_friction_gets_narrow_widths_and_two_bands_a_basis():
     table = double.friction_search_
     single = table[table["n_friction_inputs"] == 1]["validation_rmse"].min()
     assert table[table["chosen"]]["validation_rmse"].iloc[0] < 0.5 * single
+
+
+def _simulated(vehicle):
+    """Six 40-second recordings of the simulator at 50 Hz (three driver styles, measured
+    sensors) in the reference car with ``vehicle``'s parameters."""
+    frames = [
+        make_lane_keeping(
+            40.0,
+            driver=style,
+            sampling_rate=50.0,
+            random_state=seed,
+            vehicle=vehicle,
+            recording=f"{style}-{seed}",
+        )
+        for seed, style in enumerate(["defensive", "aggressive", "novice"] * 2)
+    ]
+    data = pd.concat(frames, ignore_index=True)
+    step = SteeringFeatures(friction_velocity="auto")
+    return step.fit(data[list(FEATURE_NAMES)], data["driver_torque"], groups=data["recording"])
+
+
+def test_a_simulated_car_gets_the_widths_of_its_friction():
+    """The simulator's column: a sharp band (3 mrad/s) gets a basis from the narrowest width
+    the measured velocity resolves, a smooth one (0.3 rad/s) wide bands only, a column
+    without friction no friction input."""
+    sharp = _simulated({"friction_velocity": 0.003}).friction_velocity_
+    smooth = _simulated({"friction_velocity": 0.3}).friction_velocity_
+    assert sharp[0] <= 0.0032 and min(smooth) >= 0.025
+    assert _simulated({"wheel_friction": 0.0}).friction_velocity_ is None
 
 
 def test_the_ladder_reads_the_velocitys_scale_through_each_filter():
