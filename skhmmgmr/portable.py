@@ -91,7 +91,12 @@ steps in order, each an object with ``name`` (the step's name in the pipeline) a
   ``steering_friction = tanh(v / friction_velocity)`` (unless ``friction_velocity`` is null)
   with ``v`` the column ``friction_column`` (for an array of widths ``w_j``, a basis: one
   input ``steering_friction_<w_j> = tanh(v / w_j)`` per width, in the array's order, named by
-  ``w_j`` to three significant digits), and for every column ``x`` of ``load_columns``
+  ``w_j`` to three significant digits), then (with ``friction_angle``, an array of
+  half-widths ``r_j``: a key written only with them, with ``angle_column`` the angle's
+  column) one input ``steering_hysteresis_<r_j> = (a - p_j) / r_j`` per half-width, ``a`` the
+  angle and ``p_j`` its play ``p_t = min(max(p_(t-1), a_t - r_j), a_t + r_j)``, restarted at
+  every recording at its first observed angle (a missing angle leaves it alone), and for
+  every column ``x`` of ``load_columns``
   and every ``p`` of ``powers`` ``sign(x) |x|^p`` (named ``<x>_signed_square``, ``<x>_cube``,
   ``<x>_signed_power<p>``; columns are names, or positions when ``feature_names_in`` is
   null). With ``velocity_filter`` ``tau``, ``v`` is
@@ -191,6 +196,8 @@ STEERING_PARAMS = (
     "velocity_filter",
     "sampling_period",
 )
+#: The keys of a step's hysteresis inputs, written only by a step that has them.
+HYSTERESIS_PARAMS = ("friction_angle", "angle_column")
 
 
 @validate_params(
@@ -522,17 +529,20 @@ def _plain(value):
 def _fitted_param(step, key):
     """A parameter of a fitted ``SteeringFeatures``, the value chosen in place of ``"auto"``
     (or, for the sampling period, read from the training rows' time)."""
-    if key in ("friction_velocity", "velocity_filter", "sampling_period"):
+    if key in ("friction_velocity", "velocity_filter", "sampling_period", "friction_angle"):
         return getattr(step, f"{key}_")
     return getattr(step, key)
 
 
 def _steering_dict(name, step):
     names = getattr(step, "feature_names_in_", None)
+    params = {key: _plain(_fitted_param(step, key)) for key in STEERING_PARAMS}
+    if step.friction_angle_ is not None:  # the keys of the hysteresis inputs, when there are
+        params |= {key: _plain(_fitted_param(step, key)) for key in HYSTERESIS_PARAMS}
     return {
         "name": str(name),
         "type": STEERING_TYPE,
-        "params": {key: _plain(_fitted_param(step, key)) for key in STEERING_PARAMS},
+        "params": params,
         "n_features_in": int(step.n_features_in_),
         "feature_names_in": None if names is None else [str(n) for n in names],
     }

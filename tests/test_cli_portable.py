@@ -36,7 +36,8 @@ def files(tmp_path_factory):
     data.to_csv(csv, index=False)
     data.to_parquet(parquet)
     model = folder / "pipe.json"
-    argv = [*FIT, "--pipeline", "torque", "--velocity-filter", "0.1", "--output", str(model)]
+    argv = [*FIT, "--pipeline", "torque", "--velocity-filter", "0.1", "--friction-angle", "none"]
+    argv += ["--output", str(model)]
     argv.insert(1, str(parquet))
     assert main(["--quiet", *argv]) == 0
     return dict(data=data, csv=csv, parquet=parquet, model=model, folder=folder)

@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import sklearn
+from test_pipeline_stream import _plain_play
 
 from skhmmgmr import SteeringFeatures, make_torque_pipeline, portable
 from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping, to_panel
@@ -24,10 +25,20 @@ PERIOD = 0.01
 BAND = 0.05  # the friction band of the data
 
 
-def _recordings(friction=((0.4, BAND),), n_recordings=6, seconds=20.0, noise=0.06, seed=0):
+def _recordings(
+    friction=((0.4, BAND),),
+    n_recordings=6,
+    seconds=20.0,
+    noise=0.06,
+    seed=0,
+    plays=(),
+    angle_noise=1e-3,
+):
     """Smooth steering with a friction torque ``sum(h * tanh(v / w))`` over the ``(h, w)`` of
-    ``friction``, the velocity measured with white noise of std ``noise``: the torque reads
-    the true velocity, the inputs the measured one."""
+    ``friction`` and a hysteresis torque ``sum(h * play_r(angle))`` over the ``(h, r)`` of
+    ``plays``, the velocity measured with white noise of std ``noise``, the angle with
+    ``angle_noise``: the torque reads the true velocity and angle, the inputs the measured
+    ones."""
     rng = np.random.default_rng(seed)
     frames = []
     t = np.arange(0.0, seconds, PERIOD)
@@ -45,11 +56,12 @@ def _recordings(friction=((0.4, BAND),), n_recordings=6, seconds=20.0, noise=0.0
         )
         torque = 8.0 * angle + rng.normal(0, 0.01, len(t))
         torque += sum(height * np.tanh(velocity / width) for height, width in friction)
+        torque += sum(height * _plain_play(angle, radius) for height, radius in plays)
         frames.append(
             pd.DataFrame(
                 {
                     "recording": f"r{number}",
-                    "steering_wheel_angle": angle + rng.normal(0, 1e-3, len(t)),
+                    "steering_wheel_angle": angle + rng.normal(0, angle_noise, len(t)),
                     "steering_wheel_velocity": velocity + rng.normal(0, noise, len(t)),
                     "lateral_acceleration": 60.0 * angle + rng.normal(0, 0.5, len(t)),
                     "driver_torque": torque,
@@ -119,6 +131,26 @@ def test_auto_finds_a_known_band_and_no_friction_where_there_is_none(friction, w
         assert not any(n.startswith("steering_friction") for n in step.get_feature_names_out())
 
 
+@pytest.mark.parametrize(
+    "friction, plays, widths, radii",
+    [
+        ((), ((0.4, 0.004),), None, (0.004,)),  # a play alone: that play
+        (((0.3, 0.05),), ((0.3, 0.004),), (0.05,), (0.004,)),  # both
+        (((0.4, 0.05),), (), (0.05,), None),  # a band alone: no play
+        ((), (), None, None),  # neither
+    ],
+)
+def test_auto_finds_a_known_play_beside_the_band(friction, plays, widths, radii):
+    """Exact angles, clean velocities: the hysteresis the torque holds (a play of half-width
+    4 mrad on the angle) is found with the friction band, or not at all where there is none."""
+    data = _recordings(friction, plays=plays, noise=0.001, angle_noise=0.0)
+    step = _auto(sampling_period=PERIOD, friction_angle="auto")
+    step.fit(data[COLUMNS], data["driver_torque"], groups=data["recording"])
+    assert (step.friction_velocity_, step.friction_angle_) == (widths, radii)
+    names = list(step.get_feature_names_out())
+    assert ("steering_hysteresis_0.004" in names) == (radii is not None)
+
+
 def test_sharp_friction_gets_narrow_widths_and_two_bands_a_basis():
     """A band of 5 mrad/s, below the grid's 6.25: a basis from the narrowest width the
     velocity resolves; a friction curve of two bands (5 and 100 mrad/s): a basis spanning
@@ -136,9 +168,9 @@ def test_sharp_friction_gets_narrow_widths_and_two_bands_a_basis():
     assert table[table["chosen"]]["validation_rmse"].iloc[0] < 0.5 * single
 
 
-def _simulated(vehicle):
-    """Six 40-second recordings of the simulator at 50 Hz (three driver styles, measured
-    sensors) in the reference car with ``vehicle``'s parameters."""
+def _simulated(vehicle, sensor_noise="typical"):
+    """Six 40-second recordings of the simulator at 50 Hz (three driver styles) in the
+    reference car with ``vehicle``'s parameters, the friction inputs chosen on them."""
     frames = [
         make_lane_keeping(
             40.0,
@@ -146,23 +178,30 @@ def _simulated(vehicle):
             sampling_rate=50.0,
             random_state=seed,
             vehicle=vehicle,
+            sensor_noise=sensor_noise,
             recording=f"{style}-{seed}",
         )
         for seed, style in enumerate(["defensive", "aggressive", "novice"] * 2)
     ]
     data = pd.concat(frames, ignore_index=True)
     step = SteeringFeatures(friction_velocity="auto")
-    return step.fit(data[list(FEATURE_NAMES)], data["driver_torque"], groups=data["recording"])
+    step.fit(data[list(FEATURE_NAMES)], data["driver_torque"], groups=data["recording"])
+    return step.friction_velocity_
 
 
 def test_a_simulated_car_gets_the_widths_of_its_friction():
-    """The simulator's column: a sharp band (3 mrad/s) gets a basis from the narrowest width
-    the measured velocity resolves, a smooth one (0.3 rad/s) wide bands only, a column
-    without friction no friction input."""
-    sharp = _simulated({"friction_velocity": 0.003}).friction_velocity_
-    smooth = _simulated({"friction_velocity": 0.3}).friction_velocity_
+    """The simulator's column: a sharp band (3 mrad/s) gets a basis from a narrow width, a
+    smooth one (0.3 rad/s) wide bands only, a column without friction no friction input. With
+    the sensors' true values the narrowest width is the band's; measured (the angle in steps of
+    0.1 deg: 87 mrad/s at 50 Hz), the velocity resolves less, and the sharp band's narrowest
+    width is still a sixteenth of the smooth one's at most."""
+    sharp = _simulated({"friction_velocity": 0.003}, sensor_noise=None)
+    smooth = _simulated({"friction_velocity": 0.3}, sensor_noise=None)
     assert sharp[0] <= 0.0032 and min(smooth) >= 0.025
-    assert _simulated({"wheel_friction": 0.0}).friction_velocity_ is None
+    sharp = _simulated({"friction_velocity": 0.003})
+    smooth = _simulated({"friction_velocity": 0.3})
+    assert sharp[0] <= smooth[0] / 16
+    assert _simulated({"wheel_friction": 0.0}) is None
 
 
 def test_the_ladder_reads_the_velocitys_scale_through_each_filter():
@@ -364,7 +403,8 @@ def pipeline(data):
     model = make_torque_pipeline(3, sampling_period=PERIOD, n_iter=10, random_state=0)
     model.fit(data[COLUMNS], data["driver_torque"], groups=data["recording"])
     assert model[0].velocity_filter_ is not None  # the stream must follow a chosen filter
-    assert len(model[0].friction_velocity_) >= 2  # and a basis
+    assert len(model[0].friction_velocity_) >= 2  # a basis
+    assert model[0].friction_angle_ is not None  # and plays
     return model
 
 
@@ -372,6 +412,7 @@ def test_the_stream_follows_the_chosen_settings(pipeline, data):
     X, groups = data[COLUMNS], data["recording"].to_numpy()
     settings = pipeline[0].stream_settings()
     assert settings["friction_velocity"] == list(pipeline[0].friction_velocity_)
+    assert settings["friction_angle"] == list(pipeline[0].friction_angle_)
     assert settings["filter_decay"] == math.exp(-PERIOD / pipeline[0].velocity_filter_)
     stream = pipeline.filter_stream()
     estimates = []
@@ -388,11 +429,14 @@ def test_the_model_file_holds_the_chosen_values(pipeline, data, tmp_path):
     document = json.loads(path.read_text())
     params = document["steps"][0]["params"]
     assert params["friction_velocity"] == list(pipeline[0].friction_velocity_)
+    assert params["friction_angle"] == list(pipeline[0].friction_angle_)
+    assert params["angle_column"] == "steering_wheel_angle"
     assert params["velocity_filter"] == pipeline[0].velocity_filter_
     # a basis needs no new format version (older readers refuse it, never misread it)
     assert document["format_version"] == document["steps"][-1]["model"]["format_version"]
     restored = portable.load(path)
     assert restored[0].friction_velocity_ == pipeline[0].friction_velocity_
+    assert restored[0].friction_angle_ == pipeline[0].friction_angle_
     X, groups = data[COLUMNS], data["recording"]
     np.testing.assert_array_equal(
         restored.predict(X, groups=groups), pipeline.predict(X, groups=groups)
@@ -401,15 +445,24 @@ def test_the_model_file_holds_the_chosen_values(pipeline, data, tmp_path):
         restored[0].transform(X, groups=groups), pipeline[0].transform(X, groups=groups)
     )
     # a file cannot hold a setting still to choose, nor a basis fit would refuse
-    for value, message in [
-        ("auto", "'steps[0].params.friction_velocity' must be a number or null or a list"),
-        ([0.01, -1.0], "'steps[0].params.friction_velocity[1]' must be greater than 0"),
-        ([], "'steps[0].params.friction_velocity' must be a non-empty list"),
-        ([0.01, 0.01], "'steps[0].params.friction_velocity' holds [0.01] more than once"),
-        ([0.01, 0.0100001], "repeats a width"),
+    velocity, angle = "friction_velocity", "friction_angle"
+    for key, value, message in [
+        (
+            velocity,
+            "auto",
+            "'steps[0].params.friction_velocity' must be a number or null or a list",
+        ),
+        (velocity, [0.01, -1.0], "'steps[0].params.friction_velocity[1]' must be greater than 0"),
+        (velocity, [], "'steps[0].params.friction_velocity' must be a non-empty list"),
+        (velocity, [0.01, 0.01], "'steps[0].params.friction_velocity' holds [0.01] more than once"),
+        (velocity, [0.01, 0.0100001], "repeats a width"),
+        (angle, "auto", "'steps[0].params.friction_angle' must be a list"),
+        (angle, 0.004, "'steps[0].params.friction_angle' must be a list"),
+        (angle, [0.004, 0.0], "'steps[0].params.friction_angle[1]' must be greater than 0"),
+        (angle, [0.004, 0.0040001], "friction_angle=(0.004, 0.0040001) repeats a width"),
     ]:
         bad = json.loads(json.dumps(document))
-        bad["steps"][0]["params"]["friction_velocity"] = value
+        bad["steps"][0]["params"][key] = value
         path.write_text(json.dumps(bad))
         with pytest.raises(ValueError, match=re.escape(message)):
             portable.load(path)
@@ -417,6 +470,18 @@ def test_the_model_file_holds_the_chosen_values(pipeline, data, tmp_path):
     path.write_text(json.dumps(document))
     with pytest.raises(ValueError, match="'steps.0..params.velocity_filter' must be a number or"):
         portable.load(path)
+
+
+def test_a_step_without_plays_writes_the_keys_of_before(data, tmp_path):
+    """The keys of the hysteresis inputs are written only with them: the file of a step
+    without them is one an older reader reads."""
+    X, y, groups = data[COLUMNS], data["driver_torque"], data["recording"]
+    pipeline = make_torque_pipeline(1, friction_angle=None, velocity_filter=None)
+    portable.save(pipeline.fit(X, y, groups=groups), tmp_path / "pipe.json")
+    params = json.loads((tmp_path / "pipe.json").read_text())["steps"][0]["params"]
+    old = ["friction_velocity", "friction_column", "load_columns", "powers", "velocity_filter"]
+    assert list(params) == [*old, "sampling_period"]
+    assert portable.load(tmp_path / "pipe.json")[0].friction_angle_ is None
 
 
 @pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler (cc) on this machine")
@@ -502,7 +567,7 @@ def test_the_sampling_period_is_read_from_a_panels_time_index(data):
     considered = set(pipe[0].friction_search_["velocity_filter"])
     assert considered == set(FILTER_CANDIDATES)
     # the same choice as with the period given, and a fixed filter needs no more
-    given = _auto(sampling_period=PERIOD).fit(X, y)
+    given = _auto(sampling_period=PERIOD, friction_angle="auto").fit(X, y)
     pd.testing.assert_frame_equal(pipe[0].friction_search_, given.friction_search_)
     fixed = SteeringFeatures(velocity_filter=0.02).fit(X)
     assert fixed.sampling_period_ == pytest.approx(PERIOD, rel=1e-12)

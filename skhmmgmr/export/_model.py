@@ -43,17 +43,20 @@ class DerivedInputs:
     ``friction``: ``(position, widths)`` or None, ``widths`` the tuple of the friction inputs'
     widths (one: a band, several: a basis); ``powers``: ``(position, power)`` of every signed
     power in the transformer's column order; ``velocity_decay``: the decay of the velocity's
-    low-pass filter per sample, or None.
+    low-pass filter per sample, or None; ``hysteresis``: ``(position, radii)`` of the angle
+    and the plays' half-widths, or None.
     """
 
     friction: tuple = None
     powers: tuple = ()
     velocity_decay: float = None
+    hysteresis: tuple = None
 
     @property
     def n_derived(self):
         widths = () if self.friction is None else self.friction[1]
-        return len(widths) + len(self.powers)
+        radii = () if self.hysteresis is None else self.hysteresis[1]
+        return len(widths) + len(radii) + len(self.powers)
 
 
 @dataclass(frozen=True)
@@ -165,6 +168,8 @@ def _derived_inputs(features, regressor):
     sources = list(features.load_columns)
     if features.friction_velocity_ is not None:
         sources.append(features.friction_column)
+    if features.friction_angle_ is not None:
+        sources.append(features.angle_column)
     # fit checked that every source column exists
     positions = {
         column: (raw_names.index(column) if isinstance(column, str) else int(column))
@@ -182,7 +187,10 @@ def _derived_inputs(features, regressor):
     decay = None
     if features.friction_velocity_ is not None and features.velocity_filter_ is not None:
         decay = math.exp(-features.sampling_period_ / features.velocity_filter_)
-    derived = DerivedInputs(friction, powers, decay)
+    hysteresis = None
+    if features.friction_angle_ is not None:
+        hysteresis = (positions[features.angle_column], tuple(features.friction_angle_))
+    derived = DerivedInputs(friction, powers, decay, hysteresis)
     expected = list(features.get_feature_names_out())
     given = getattr(regressor, "feature_names_in_", None)
     if n_raw + derived.n_derived != regressor.n_features_in_ or (

@@ -12,6 +12,14 @@ regressions gated by Gaussians can follow them only with many states:
   named ``steering_friction``), or a basis of several bands at once, ``tanh(v / w_j)`` for the
   widths ``w_j`` (:func:`friction_inputs`, named ``steering_friction_<w_j>``), whose
   combination the regression fits: the shape of the friction curve, from the data;
+- **friction has a memory**: a column whose friction sticks holds the wheel until the driver
+  has turned it far enough to overcome it (through a torsion bar, the bar's twist under the
+  friction torque), whatever the velocity; the driver's torque then follows the angle turned
+  since the last reversal, the hysteresis of a steering system's torque against its angle.
+  A play of half-width ``r`` on the steering-wheel angle (``p_t = clip(p_(t-1), x_t - r, x_t
+  + r)``, the elementary operator of rate-independent hysteresis) gives ``(x_t - p_t) / r`` in
+  [-1, 1] (:func:`hysteresis_input`, named ``steering_hysteresis_<r>``, a basis of several
+  half-widths ``friction_angle``);
 - **the steering load is compressed**: the boost curve of an electric power assist grows with
   the torque (the driver's share of a large load is smaller), and the tyres' aligning torque
   saturates with slip. Odd powers of the load's proxies (the steering-wheel angle and the lateral
@@ -20,7 +28,8 @@ regressions gated by Gaussians can follow them only with many states:
 
 At high sampling rates the measured velocity is noisy at the scale of the friction band; a
 causal first-order filter (:func:`low_pass`, restarted at every recording by
-:func:`filtered_velocity`) keeps that noise out of the friction input. The stream
+:func:`filtered_velocity`) keeps that noise out of the friction input. The play restarts at
+every recording too (:func:`recording_hysteresis`). The stream
 (``skhmmgmr/streaming/_derived.py``) and the generated C compute the same inputs one sample
 at a time.
 """
@@ -29,12 +38,15 @@ import math
 import numbers
 
 import numpy as np
+from numba import njit
 from scipy.signal import lfilter
 
 from ..streaming._derived import check_time_steps
 
 #: The name of the friction input.
 FRICTION_NAME = "steering_friction"
+#: The prefix of the names of the hysteresis inputs.
+HYSTERESIS_NAME = "steering_hysteresis"
 
 
 def friction_input(velocity, friction_velocity):
@@ -90,23 +102,72 @@ def load_inputs(values, positions, load_columns, powers):
     return derived
 
 
-def derived_names(friction, load_columns, powers):
+def hysteresis_names(radii):
+    """The names of the hysteresis inputs of the half-widths ``radii`` (a tuple, or None):
+    ``steering_hysteresis_<r>``, ``r`` to three significant digits."""
+    return [f"{HYSTERESIS_NAME}_{float(r):.3g}" for r in radii or ()]
+
+
+@njit(cache=True)
+def _play(values, radius, out):
+    """The play of half-width ``radius`` over one recording's ``values`` into ``out``; NaN
+    gives NaN and leaves the play alone, the first observed value starts it (output 0)."""
+    started = False
+    position = 0.0
+    for t in range(values.shape[0]):
+        x = values[t]
+        if not np.isfinite(x):
+            out[t] = np.nan
+            continue
+        if not started:
+            position = x
+            started = True
+        elif position < x - radius:
+            position = x - radius
+        elif position > x + radius:
+            position = x + radius
+        out[t] = (x - position) / radius
+
+
+def hysteresis_input(angle, radius):
+    """The hysteresis input ``(x_t - p_t) / radius`` of one recording's angle, the play ``p``
+    started at the first observed angle (see the module's docstring)."""
+    out = np.empty(len(angle))
+    _play(np.ascontiguousarray(angle, dtype=float), float(radius), out)
+    return out
+
+
+def recording_hysteresis(angle, layout, radii):
+    """The hysteresis inputs of rows in filter order (their recordings' ``layout``), the play
+    restarted at every recording, by name."""
+    recordings = layout.recordings(len(angle))
+    inputs = {}
+    for name, radius in zip(hysteresis_names(radii), radii, strict=True):
+        column = np.empty(len(angle))
+        for start, stop in zip(recordings.starts, recordings.stops, strict=True):
+            column[start:stop] = hysteresis_input(angle[start:stop], radius)
+        inputs[name] = column
+    return inputs
+
+
+def derived_names(friction, load_columns, powers, radii=None):
     """The names of the derived inputs, in their order: the friction inputs of ``friction``
-    (a ``friction_velocity``, see :func:`friction_names`), then the signed powers of every
-    load column."""
-    names = friction_names(friction)
+    (a ``friction_velocity``, see :func:`friction_names`), the hysteresis inputs of ``radii``
+    (a ``friction_angle``), then the signed powers of every load column."""
+    names = friction_names(friction) + hysteresis_names(radii)
     names += [power_name(column, power) for column in load_columns for power in powers]
     return names
 
 
-def derived_units(units, friction, load_columns, powers):
+def derived_units(units, friction, load_columns, powers, radii=None):
     """The units of the input columns (a mapping of names to units, or ``None``) with those of
-    the derived inputs added: 1 for the friction inputs of ``friction``, ``(unit)^p`` for the
-    power ``p`` of a column with a unit; ``None`` without units."""
+    the derived inputs added: 1 for the friction inputs of ``friction`` and the hysteresis
+    inputs of ``radii``, ``(unit)^p`` for the power ``p`` of a column with a unit; ``None``
+    without units."""
     if not isinstance(units, dict):
         return None
     units = dict(units)
-    for name in friction_names(friction):
+    for name in friction_names(friction) + hysteresis_names(radii):
         units[name] = "1"
     for column in load_columns:
         unit = units.get(column)

@@ -1,4 +1,5 @@
-"""The ``"auto"`` choice of the friction inputs and the velocity filter of ``SteeringFeatures``.
+"""The ``"auto"`` choice of the friction inputs, the hysteresis inputs and the velocity filter
+of ``SteeringFeatures``.
 
 Friction differs from one steering system to the next: the band of steering-wheel velocities
 over which it changes sign spans two orders of magnitude among cars (a few thousandths to
@@ -15,15 +16,22 @@ recordings:
   a wider band is nearly linear over almost every row, and the velocity is an input already),
   read from the velocity the inputs use: each velocity filter's own, a filtered velocity
   being less noisy and resolving narrower bands;
+- **the ladder of the hysteresis** (``friction_angle="auto"``, :func:`angle_ladder`): plays
+  of half-widths a factor 2 apart on :data:`RADIUS_GRID` (``0.001 * 2**k`` rad), from half the
+  angle's resolution (the low :data:`ANGLE_QUANTILES` quantile of its non-zero steps: a
+  narrower play turns over at every step) up to the high quantile of the angle's distance
+  from its median (a wider play is nearly the angle itself);
 - **the candidates**: no friction input, and every window of consecutive widths of the ladder
   (a basis ``tanh(v / w_j)``, whose combination each state's regression fits: one width is
-  one band), with each velocity filter of :data:`FILTER_CANDIDATES`;
+  one band), each with no hysteresis input or every window of consecutive half-widths of its
+  ladder, with each velocity filter of :data:`FILTER_CANDIDATES`;
 - **the score**: the held-out error of a least-squares fit of the target on the inputs, the
-  load inputs and the candidate's friction inputs, the recordings split in
+  load inputs and the candidate's friction and hysteresis inputs, the recordings split in
   :data:`SEARCH_FOLDS` folds;
-- **the rule**: the fewest friction inputs whose error is within :data:`PARSIMONY` of the
-  least; of those, the least error. A car without friction keeps none, a car whose friction
-  one band describes keeps one.
+- **the rule**: the fewest friction and hysteresis inputs whose error is within
+  :data:`PARSIMONY` of the least; of those, the least error. A car without friction keeps
+  none, a car whose friction one band describes keeps one, a column whose friction sticks
+  keeps plays.
 
 A linear fit ranks the candidates nearly as the regressor does (the friction inputs enter
 every state's regression alike) at a small part of its cost: one pass over the rows per
@@ -43,12 +51,19 @@ WIDTH_GRID = tuple(0.1 * 2.0**k for k in range(-10, 5))
 #: narrowest band's transition ``|v| < 2 w`` holds at least the first, the widest band is at
 #: most the second quantile of ``|v|``.
 LADDER_QUANTILES = (0.05, 0.9)
+#: The half-widths [rad] a ladder of plays takes, a factor 2 apart: ``0.001 * 2**k``, from
+#: 1/16 to 64 mrad.
+RADIUS_GRID = tuple(0.001 * 2.0**k for k in range(-4, 7))
+#: The quantiles that set the ends of the ladder of plays: of the angle's non-zero steps
+#: (twice the narrowest at least), of its distance from its median (the widest at most).
+ANGLE_QUANTILES = (0.05, 0.25)
 #: The velocity filters [s] ``velocity_filter="auto"`` compares (``None``: no filter).
 FILTER_CANDIDATES = (None, 0.02, 0.05)
 #: Folds of the inner validation of the "auto" choices.
 SEARCH_FOLDS = 3
-#: The relative held-out error within which fewer friction inputs are preferred.
-PARSIMONY = 0.002
+#: The relative held-out error within which fewer friction and hysteresis inputs are
+#: preferred.
+PARSIMONY = 0.005
 
 
 def search_filters(velocity_filter, sampling_period):
@@ -75,6 +90,25 @@ def velocity_ladder(velocity):
     return ladder
 
 
+def angle_ladder(angle, recordings):
+    """The half-widths of :data:`RADIUS_GRID` the angle resolves and the data needs (see the
+    module's docstring); empty when the angle never moves."""
+    steps = []
+    for start, stop in zip(recordings.starts, recordings.stops, strict=True):
+        steps.append(np.abs(np.diff(angle[start:stop])))
+    steps = np.concatenate(steps) if steps else np.empty(0)
+    steps = steps[np.isfinite(steps) & (steps > 0)]
+    observed = angle[np.isfinite(angle)]
+    if not steps.size:
+        return ()
+    low = np.quantile(steps, ANGLE_QUANTILES[0])
+    high = np.quantile(np.abs(observed - np.median(observed)), ANGLE_QUANTILES[1])
+    ladder = tuple(r for r in RADIUS_GRID if 2.0 * r >= low and r <= high)
+    if not ladder:  # an angle that moves less than its steps: the play at its resolution
+        ladder = (min(RADIUS_GRID, key=lambda r: abs(math.log(2.0 * r / low))),)
+    return ladder
+
+
 def basis_windows(ladder):
     """No friction input (``None``), then every window of consecutive widths of ``ladder``,
     fewest first: ``(friction_velocity, indices of its widths in the ladder)``."""
@@ -96,19 +130,21 @@ def friction_search(base, target, recordings, searched, settings):
     target : ndarray of shape (n_samples, n_outputs)
     recordings : Recordings
         The recordings of the rows, for the folds.
-    searched : list of (float or None, list of ndarray, list of (object, tuple of int))
-        Per velocity filter: its time constant, the friction columns it gives (one per width)
-        and its candidates, each the ``friction_velocity`` it stands for and the indices of
-        its columns.
+    searched : list of (float or None, list of ndarray, list of (dict, tuple of int))
+        Per velocity filter: its time constant, the friction and hysteresis columns it gives
+        (one per width) and its candidates, each the settings it stands for
+        (``friction_velocity``, ``friction_angle``) and the indices of its columns.
     settings : str
         The settings searched, for the error when the rows are too few.
 
     Returns
     -------
     table : DataFrame
-        ``friction_velocity`` (a width, a tuple of widths or None), ``velocity_filter``,
-        ``n_friction_inputs``, ``validation_rmse`` and ``chosen`` (by the rule of the
-        module's docstring; the first of equal ones in the order of ``searched``).
+        The settings of every candidate (``friction_velocity``: a width, a tuple of widths or
+        None; ``friction_angle``: a tuple of half-widths or None), ``velocity_filter``,
+        ``n_friction_inputs`` (friction and hysteresis inputs), ``validation_rmse`` and
+        ``chosen`` (by the rule of the module's docstring; the first of equal ones in the
+        order of ``searched``).
     """
     folds = search_folds(recordings, len(base))
     finite = np.isfinite(base).all(axis=1) & np.isfinite(target).all(axis=1)
@@ -130,22 +166,20 @@ def friction_search(base, target, recordings, searched, settings):
         total = sum(products.values())
         n_base, n_outputs = base.shape[1], target.shape[1]
         outputs = list(range(joined.shape[1] - n_outputs, joined.shape[1]))
-        for friction, indices in candidates:
+        for settings_of, indices in candidates:
             inputs = [*range(n_base), *(n_base + i for i in indices)]
             squared = sum(
                 _held_out_squares(total - products[fold], products[fold], inputs, outputs)
                 for fold in used
             )
             rmse = math.sqrt(max(squared, 0.0) / (len(base) * n_outputs))
-            rows.append((friction, time_constant, len(indices), rmse))
+            rows.append((settings_of, time_constant, len(indices), rmse))
     table = pd.DataFrame(
-        {
-            "friction_velocity": pd.Series([row[0] for row in rows], dtype=object),
-            "velocity_filter": pd.Series([row[1] for row in rows], dtype=object),
-            "n_friction_inputs": [row[2] for row in rows],
-            "validation_rmse": [row[3] for row in rows],
-        }
+        {name: pd.Series([row[0][name] for row in rows], dtype=object) for name in rows[0][0]}
     )
+    table["velocity_filter"] = pd.Series([row[1] for row in rows], dtype=object)
+    table["n_friction_inputs"] = [row[2] for row in rows]
+    table["validation_rmse"] = [row[3] for row in rows]
     table["chosen"] = np.arange(len(table)) == choose(table)
     return table
 

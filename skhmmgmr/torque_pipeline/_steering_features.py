@@ -31,11 +31,15 @@ from ._derived_inputs import (
     friction_inputs,
     friction_names,
     friction_widths,
+    hysteresis_names,
     load_inputs,
+    recording_hysteresis,
 )
 from ._friction_search import (
     AUTO,
+    RADIUS_GRID,
     WIDTH_GRID,
+    angle_ladder,
     basis_windows,
     friction_search,
     search_filters,
@@ -48,11 +52,12 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     """Append the friction and load-compression inputs of a power-assisted steering system.
 
     Only the ``"auto"`` settings are learned: ``fit`` chooses the friction inputs (no band, one
-    band or a basis of several, their widths read from the velocity's own scale) and the
-    velocity filter on the target by a grouped inner validation (see ``friction_search_``
-    and the user guide). Without a velocity filter the transform is row by row, so it is
-    causal and streams: the same row always gives the same derived inputs. With it, the
-    friction input reads the velocity through a causal first-order filter that restarts at
+    band or a basis of several, their widths read from the velocity's own scale), the
+    hysteresis inputs and the velocity filter on the target by a grouped inner validation (see
+    ``friction_search_`` and the user guide). Without a velocity filter and hysteresis inputs
+    the transform is row by row, so it is causal and streams: the same row always gives the
+    same derived inputs. With them, the friction inputs read the velocity through a causal
+    first-order filter, and the hysteresis inputs the angle through plays, both restarted at
     every recording (the recordings come from ``groups`` or from the index of a panel,
     :func:`skhmmgmr.datasets.to_panel`; without either, the rows form one recording in time
     order). Missing values (NaN) stay missing.
@@ -71,6 +76,18 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         widest the data needs (``_friction_search.py``; the fewest inputs within 0.2 % of the
         least error); one width chosen is the tuple of that width. ``None`` adds no friction
         input.
+    friction_angle : float, tuple of float, "auto" or None, default=None
+        Half-widths ``r`` [rad] of plays on the steering-wheel angle: the hysteresis inputs
+        ``steering_hysteresis_<r> = (angle - p) / r`` in [-1, 1], the play ``p`` following the
+        angle at most ``r`` behind it (``p_t = clip(p_(t-1), angle_t - r, angle_t + r)``,
+        started at each recording's first observed angle): the angle turned since the last
+        reversal, over which a column whose friction sticks twists before it slips (the
+        hysteresis of torque against angle). ``"auto"``: chosen in ``fit`` with the friction
+        inputs, among none and every run of consecutive half-widths of a ladder a factor 2
+        apart from the angle's resolution up to the angle's excursions (``_friction_search.py``).
+        A missing angle gives missing hysteresis inputs and leaves the plays alone.
+    angle_column : str or int, default="steering_wheel_angle"
+        The column holding the steering-wheel angle, for ``friction_angle``.
     friction_column : str or int, default="steering_wheel_velocity"
         The column holding the steering-wheel velocity (a name, or a position for arrays).
     load_columns : tuple of str or int, default=("steering_wheel_angle", "lateral_acceleration")
@@ -99,6 +116,9 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     friction_velocity_ : float, tuple of float or None
         The friction band or basis widths the transform uses: ``friction_velocity``, or the
         ones chosen (a tuple, ``None`` for no friction input).
+    friction_angle_ : tuple of float or None
+        The plays' half-widths the transform uses: ``friction_angle`` (one number as a tuple of
+        one), or the ones chosen (``None``: no hysteresis input).
     velocity_filter_ : float or None
         The velocity filter's time constant the transform uses (``None``: no filter).
     sampling_period_ : float or None
@@ -106,7 +126,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         one read from the time index in ``fit`` (``None``: unknown).
     friction_search_ : DataFrame or None
         The ``"auto"`` choice: one row per candidate, with ``friction_velocity`` (a width, a
-        tuple of widths or None), ``velocity_filter``, ``n_friction_inputs``,
+        tuple of widths or None), ``friction_angle`` (a tuple of half-widths or None),
+        ``velocity_filter``, ``n_friction_inputs`` (friction and hysteresis inputs),
         ``validation_rmse`` (held-out root mean squared error of the linear fit, in the
         target's unit) and ``chosen``; ``None`` without an ``"auto"`` setting.
     n_features_in_ : int
@@ -158,6 +179,14 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             None,
         ],
         "friction_column": [str, Interval(numbers.Integral, 0, None, closed="left")],
+        "friction_angle": [
+            Interval(numbers.Real, 0, None, closed="neither"),
+            StrOptions({AUTO}),
+            tuple,
+            list,
+            None,
+        ],
+        "angle_column": [str, Interval(numbers.Integral, 0, None, closed="left")],
         "load_columns": [tuple, list],
         "powers": [tuple, list],
         "velocity_filter": [
@@ -176,6 +205,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         powers=(2, 3),
         velocity_filter=None,
         sampling_period=None,
+        friction_angle=None,
+        angle_column="steering_wheel_angle",
     ):
         self.friction_velocity = friction_velocity
         self.friction_column = friction_column
@@ -183,6 +214,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         self.powers = powers
         self.velocity_filter = velocity_filter
         self.sampling_period = sampling_period
+        self.friction_angle = friction_angle
+        self.angle_column = angle_column
 
     __metadata_request__fit = {"groups": True}
     __metadata_request__transform = {"groups": True}
@@ -191,6 +224,10 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         # a step pickled before sampling_period_ existed filtered with sampling_period
         if "n_features_in_" in state and "sampling_period_" not in state:
             state = {**state, "sampling_period_": state.get("sampling_period")}
+        # one pickled before the hysteresis inputs existed had none
+        state = {"friction_angle": None, "angle_column": "steering_wheel_angle", **state}
+        if "n_features_in_" in state and "friction_angle_" not in state:
+            state["friction_angle_"] = None
         super().__setstate__(state)
 
     @_fit_context(prefer_skip_nested_validation=True)
@@ -206,8 +243,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             otherwise.
         groups : array-like of shape (n_samples,), default=None
             Recording id of every row: the folds of the ``"auto"`` choice are whole
-            recordings, and the velocity filter restarts at each. ``None``: the index's
-            recording level if any, else one recording.
+            recordings, and the velocity filter and the plays restart at each. ``None``: the
+            index's recording level if any, else one recording.
 
         Returns
         -------
@@ -217,11 +254,12 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         self._check_parameters()
         values = validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
         self.friction_velocity_ = _as_setting(self.friction_velocity)
+        self.friction_angle_ = _as_radii(self.friction_angle)
         self._check_inputs()
         self.velocity_filter_ = None if self.friction_velocity is None else self.velocity_filter
         self.sampling_period_ = self.sampling_period
         self.friction_search_ = None
-        searched = AUTO in (self.friction_velocity_, self.velocity_filter_)
+        searched = AUTO in (self.friction_velocity_, self.velocity_filter_, self.friction_angle_)
         if searched and y is None:
             raise ValueError(
                 f"{self._settings()}: an 'auto' setting is chosen on the target, so fit needs "
@@ -246,11 +284,12 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
                     "seconds between two rows), or X with a 'time' index level to read it "
                     "from; got sampling_period=None."
                 )
-        if AUTO not in (self.friction_velocity_, self.velocity_filter_):
+        if AUTO not in (self.friction_velocity_, self.velocity_filter_, self.friction_angle_):
             return
         self.friction_search_ = self._search(layout, values, y)
         chosen = self.friction_search_[self.friction_search_["chosen"]].iloc[0]
         self.friction_velocity_ = _as_setting(chosen["friction_velocity"])
+        self.friction_angle_ = _as_radii(chosen["friction_angle"])
         self.velocity_filter_ = chosen["velocity_filter"]
         if self.friction_velocity_ is None:
             self.velocity_filter_ = None
@@ -260,24 +299,51 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     def _search(self, layout, values, y):
         """The table of the ``"auto"`` choice on rows in filter order: every candidate's
         validation RMSE (``_friction_search.py``), the ladder of widths of ``"auto"`` read
-        from each filter's velocity."""
+        from each filter's velocity, that of the plays from the angle."""
         target = np.asarray(y, dtype=float).reshape(len(values), -1)
         positions = self._sources()
         loads = load_inputs(values, positions, self.load_columns, self.powers)
-        velocity = values[:, positions[self.friction_column]]
-        searched = []
-        for time_constant in search_filters(self.velocity_filter, self.sampling_period_):
-            filtered = velocity
-            if time_constant is not None:
-                filtered = filtered_velocity(velocity, layout, self.sampling_period_, time_constant)
-            if self.friction_velocity == AUTO:
-                widths = velocity_ladder(filtered)
-                candidates = basis_windows(widths)
+        recordings = layout.recordings(len(values))
+        if self.friction_angle_ is None:
+            radii, plays = (), [(None, ())]
+        else:
+            angle = values[:, positions[self.angle_column]]
+            if self.friction_angle_ == AUTO:
+                radii = angle_ladder(angle, recordings)
+                plays = basis_windows(radii)
             else:
-                widths = friction_widths(self.friction_velocity_)
-                candidates = [(self.friction_velocity_, tuple(range(len(widths))))]
-            columns = list(friction_inputs(filtered, widths).values())
-            searched.append((time_constant, columns, candidates))
+                radii = self.friction_angle_
+                plays = [(radii, tuple(range(len(radii))))]
+        hysteresis = list(recording_hysteresis(angle, layout, radii).values()) if radii else []
+        velocity = None
+        if self.friction_velocity is not None:
+            velocity = values[:, positions[self.friction_column]]
+        searched = []
+        for time_constant in search_filters(self.velocity_filter_, self.sampling_period_):
+            if velocity is None:
+                widths, bands = (), [(None, ())]
+            else:
+                filtered = velocity
+                if time_constant is not None:
+                    filtered = filtered_velocity(
+                        velocity, layout, self.sampling_period_, time_constant
+                    )
+                if self.friction_velocity_ == AUTO:
+                    widths = velocity_ladder(filtered)
+                    bands = basis_windows(widths)
+                else:
+                    widths = friction_widths(self.friction_velocity_)
+                    bands = [(self.friction_velocity_, tuple(range(len(widths))))]
+            columns = list(friction_inputs(filtered, widths).values()) if widths else []
+            candidates = [
+                (
+                    {"friction_velocity": band, "friction_angle": play},
+                    (*band_columns, *(len(widths) + i for i in play_columns)),
+                )
+                for band, band_columns in bands
+                for play, play_columns in plays
+            ]
+            searched.append((time_constant, [*columns, *hysteresis], candidates))
         return friction_search(
             np.column_stack([values, *loads.values()]),
             target,
@@ -290,7 +356,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         """The settings searched, as the errors name them."""
         return (
             f"friction_velocity={self.friction_velocity!r}, "
-            f"velocity_filter={self.velocity_filter!r}"
+            f"velocity_filter={self.velocity_filter!r}, "
+            f"friction_angle={self.friction_angle!r}"
         )
 
     def _check_parameters(self):
@@ -306,7 +373,9 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         if len(set(self.load_columns)) != len(self.load_columns):
             raise ValueError(f"load_columns={self.load_columns!r} repeats a column.")
         if isinstance(self.friction_velocity, tuple | list):
-            _check_widths(self.friction_velocity)
+            _check_widths(self.friction_velocity, "friction_velocity", friction_names)
+        if isinstance(self.friction_angle, tuple | list):
+            _check_widths(self.friction_angle, "friction_angle", hysteresis_names)
 
     def _check_inputs(self):
         """The fitted inputs hold the source columns and none of the derived ones."""
@@ -317,7 +386,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             raise ValueError(
                 f"X already has the column(s) {taken}, which SteeringFeatures derives: rename "
                 "them, or leave their source out (friction_velocity=None for the friction "
-                "input, load_columns or powers for the others)."
+                "input, friction_angle=None for the hysteresis inputs, load_columns or powers "
+                "for the others)."
             )
 
     def fit_transform(self, X, y=None, groups=None):
@@ -330,7 +400,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         y : array-like of shape (n_samples,) or (n_samples, n_outputs), default=None
             The target, for an ``"auto"`` setting (see :meth:`fit`).
         groups : array-like of shape (n_samples,), default=None
-            Recording id of every row, for ``velocity_filter`` and the ``"auto"`` choice.
+            Recording id of every row, for ``velocity_filter``, ``friction_angle`` and the
+            ``"auto"`` choice.
 
         Returns
         -------
@@ -347,8 +418,9 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         X : DataFrame or array-like of shape (n_samples, n_features)
             The columns seen in :meth:`fit`.
         groups : array-like of shape (n_samples,), default=None
-            Recording id of every row, for ``velocity_filter`` (the filter restarts at every
-            recording; the rows of a recording contiguous and in time order, unless the
+            Recording id of every row, for ``velocity_filter`` and ``friction_angle`` (the
+            filter and the plays restart at every recording; the rows of a recording
+            contiguous and in time order, unless the
             index of a panel orders them). ``None``: the index's recording level if any,
             else one recording.
 
@@ -372,6 +444,10 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
                     self._filter_in_filter_order, X, groups, rows={"velocity": velocity}
                 )
             derived.update(friction_inputs(velocity, self.friction_velocity_))
+        if self.friction_angle_ is not None:
+            angle = values[:, positions[self.angle_column]]
+            plays = in_filter_order(self._play_in_filter_order, X, groups, rows={"angle": angle})
+            derived.update(zip(hysteresis_names(self.friction_angle_), plays.T, strict=True))
         derived.update(load_inputs(values, positions, self.load_columns, self.powers))
         if frame is None:
             return np.column_stack([values, *derived.values()])
@@ -382,6 +458,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             self.friction_velocity_,
             self.load_columns,
             self.powers,
+            self.friction_angle_,
         )
         out.attrs = {**frame.attrs, "units": units}
         if units is None:
@@ -391,6 +468,11 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     def _filter_in_filter_order(self, layout, X, velocity):
         """The velocity of rows in filter order through the fitted velocity filter."""
         return filtered_velocity(velocity, layout, self.sampling_period_, self.velocity_filter_)
+
+    def _play_in_filter_order(self, layout, X, angle):
+        """The hysteresis inputs of rows in filter order, one column per play."""
+        plays = recording_hysteresis(angle, layout, self.friction_angle_)
+        return np.column_stack(list(plays.values()))
 
     def get_feature_names_out(self, input_features=None):
         """Input names followed by the derived inputs' names.
@@ -432,6 +514,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             list of a basis' widths, one friction input each); ``filter_decay``,
             the velocity filter's factor per row ``exp(-sampling_period / velocity_filter)``
             (``None`` without the filter), and ``sampling_period`` (``sampling_period_``);
+            ``angle_position`` (the angle's position in the row, ``None`` without hysteresis
+            inputs) and ``friction_angle`` (the list of the plays' half-widths);
             ``load_positions`` (the load columns' positions) and ``powers``.
 
         Examples
@@ -449,7 +533,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         check_is_fitted(self, "n_features_in_")
         positions = self._sources()
         names = getattr(self, "feature_names_in_", None)
-        friction = self.friction_velocity_
+        friction, radii = self.friction_velocity_, self.friction_angle_
         filtered = friction is not None and self.velocity_filter_ is not None
         if isinstance(friction, tuple):
             friction = list(friction_widths(friction))
@@ -467,20 +551,26 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             "sampling_period": None
             if self.sampling_period_ is None
             else float(self.sampling_period_),
+            "angle_position": None if radii is None else positions[self.angle_column],
+            "friction_angle": None if radii is None else [float(r) for r in radii],
             "load_positions": [positions[column] for column in self.load_columns],
             "powers": [int(power) for power in self.powers],
         }
 
     def _derived_names(self):
         """The derived inputs' names; before an ``"auto"`` choice, every name it may give."""
-        friction = self.friction_velocity_
+        friction, radii = self.friction_velocity_, self.friction_angle_
         if isinstance(friction, str):  # "auto": a basis of widths of the grid
             friction = WIDTH_GRID
-        return derived_names(friction, self.load_columns, self.powers)
+        if isinstance(radii, str):
+            radii = RADIUS_GRID
+        return derived_names(friction, self.load_columns, self.powers, radii)
 
     def _sources(self):
         """Position of every source column, with an error naming the missing ones."""
         needed = list(self.load_columns)
+        if self.friction_angle is not None:
+            needed.insert(0, self.angle_column)
         if self.friction_velocity is not None:
             needed.insert(0, self.friction_column)
         names = getattr(self, "feature_names_in_", None)
@@ -505,7 +595,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             )
             raise ValueError(
                 f"SteeringFeatures needs the column(s) {missing} (friction_column / "
-                f"load_columns); {where}."
+                f"angle_column / load_columns); {where}."
             )
         return positions
 
@@ -526,8 +616,8 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
         caller_name="SteeringFeatures",
     )
     step._check_parameters()
-    for name in ("friction_velocity", "velocity_filter"):
-        if params.get(name) == AUTO:
+    for name in ("friction_velocity", "velocity_filter", "friction_angle"):
+        if isinstance(params.get(name), str) and params[name] == AUTO:
             raise ValueError(
                 f"{name}='auto' is a setting to fit; a fitted step holds the chosen value."
             )
@@ -537,6 +627,7 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
             "between two rows); got sampling_period=None."
         )
     step.friction_velocity_ = _as_setting(step.friction_velocity)
+    step.friction_angle_ = _as_radii(step.friction_angle)
     step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
     step.sampling_period_ = step.sampling_period
     step.friction_search_ = None
@@ -554,11 +645,20 @@ def _as_setting(friction):
     return friction
 
 
-def _check_widths(widths):
-    """Refuse a basis that is empty, holds a width that is not a positive finite number, or
-    two widths of one name."""
+def _as_radii(radii):
+    """A ``friction_angle`` as the fitted step holds it: a tuple of floats (or None, "auto")."""
+    if isinstance(radii, tuple | list):
+        return tuple(float(r) for r in radii)
+    if radii is None or isinstance(radii, str):
+        return radii
+    return (float(radii),)
+
+
+def _check_widths(widths, parameter, names_of):
+    """Refuse a basis (of ``parameter``, whose inputs ``names_of`` names) that is empty, holds
+    a width that is not a positive finite number, or two widths of one name."""
     if not widths:
-        raise ValueError("friction_velocity=() holds no width; give None for no friction input.")
+        raise ValueError(f"{parameter}={widths!r} holds no width; give None for no such input.")
     for width in widths:
         if (
             isinstance(width, bool)
@@ -567,12 +667,11 @@ def _check_widths(widths):
             or width <= 0
         ):
             raise ValueError(
-                f"friction_velocity must hold widths > 0 [rad/s]; got {width!r} in "
-                f"friction_velocity={widths!r}."
+                f"{parameter} must hold widths > 0; got {width!r} in {parameter}={widths!r}."
             )
-    names = friction_names(tuple(widths))
+    names = names_of(tuple(widths))
     if len(set(names)) != len(names):
         raise ValueError(
-            f"friction_velocity={widths!r} repeats a width (to three significant digits, "
-            f"which name the inputs: {names})."
+            f"{parameter}={widths!r} repeats a width (to three significant digits, which "
+            f"name the inputs: {names})."
         )
