@@ -9,7 +9,9 @@ training recordings and scored on the test recordings:
 - ``HistGradientBoostingRegressor(max_iter=300)`` on the 18 features (default boosting);
 - ordinary least squares on the 18 features (``OLS``), and on the 18 features plus the
   friction basis ``tanh(steering_wheel_velocity / w)`` for w in 3, 6, 12, 25 and 50 mrad/s
-  (``OLS + basis``: the model a vehicle engineer writes by hand, issue #53);
+  (``OLS + basis``: the model a vehicle engineer writes by hand, issue #53), and on the 18
+  features plus the friction and hysteresis inputs the pipeline chose from the data
+  (``OLS + chosen``: the same linear model on the data's own widths);
 - ``make_torque_pipeline`` with its defaults (the friction inputs, the velocity filter and
   the read-out chosen in ``fit``), the number of states chosen among ``--states`` by mean
   validation accuracy; the chosen friction widths, filter and read-out are printed.
@@ -43,7 +45,7 @@ FEATURES = list(FEATURE_NAMES)
 #: The friction basis of the expert's linear model [rad/s] (issue #53).
 EXPERT_WIDTHS = (0.003, 0.006, 0.012, 0.025, 0.05)
 BOOSTING = "HistGradientBoosting"
-OLS, OLS_BASIS = "OLS", "OLS + basis"
+OLS, OLS_BASIS, OLS_CHOSEN = "OLS", "OLS + basis", "OLS + chosen"
 #: The roughness the pipeline may have above the measured torque's.
 ROUGHNESS_MARGIN = 1.01
 
@@ -60,6 +62,14 @@ def with_basis(part):
     velocity = part["steering_wheel_velocity"].to_numpy()
     basis = [np.tanh(velocity / width) for width in EXPERT_WIDTHS]
     return np.column_stack([part[FEATURES].to_numpy(), *basis])
+
+
+def with_chosen(features, part):
+    """The 18 features and the friction and hysteresis inputs ``features`` (the pipeline's
+    fitted ``SteeringFeatures``) derives from them."""
+    derived = features.transform(part[FEATURES], groups=part["recording"].to_numpy())
+    chosen = [c for c in derived.columns if c.startswith(("steering_friction", "steering_hyst"))]
+    return derived[FEATURES + chosen].to_numpy()
 
 
 def predict(model, part, **kwargs):
@@ -98,6 +108,9 @@ def describe(features, readout, period):
     else:
         widths = widths if isinstance(widths, tuple) else (widths,)
         friction = "widths " + ", ".join(f"{w * 1000:.3g}" for w in widths) + " mrad/s"
+    radii = features.friction_angle_
+    if radii:
+        friction += ", plays " + ", ".join(f"{r * 1000:.3g}" for r in radii) + " mrad"
     tau = features.velocity_filter_
     velocity = "no filter" if tau is None else f"filter {tau * 1000:g} ms"
     return f"{friction}, {velocity}, read-out {readout * period * 1000:.1f} ms"
@@ -128,6 +141,8 @@ def run(vehicle, rate, seed, states, duration, cache):
         rate,
         states,
     )
+    chosen = LinearRegression().fit(with_chosen(pipeline[0], train), target)
+    rows[OLS_CHOSEN] = scores(y, chosen.predict(with_chosen(pipeline[0], test)), groups, rate)
     name = f"pipeline K={k}"
     rows[name] = scores(y, predict(pipeline, test), groups, rate)
     car = "default" if vehicle is None else str(vehicle)
