@@ -88,8 +88,9 @@ def draw_driver(style, spread, rng):
         return parameters
 
 
-def simulate(name, parameters, sections, seed):
-    """Recordings of one driver: ``sections`` is a list of (split, setting, duration)."""
+def simulate(name, parameters, sections, seed, vehicle=None):
+    """Recordings of one driver in ``vehicle`` (None: the reference car): ``sections`` is a
+    list of (split, setting, duration)."""
     rng = np.random.default_rng(seed)
     frames = []
     for i, (split, setting, duration) in enumerate(sections):
@@ -103,6 +104,7 @@ def simulate(name, parameters, sections, seed):
                     random_state=int(rng.integers(2**31 - 1)),
                     recording=f"{name}-{split}-{i:02d}",
                     split=split,
+                    vehicle=vehicle,
                 )
                 break
             except RuntimeError:

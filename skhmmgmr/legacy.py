@@ -25,6 +25,7 @@ Examples
 
 import io
 import json
+import os
 import pickle
 import zipfile
 
@@ -178,8 +179,18 @@ def load_pickle(file):
     """
     if hasattr(file, "read"):
         return LegacyUnpickler(file).load()
-    with open(file, "rb") as opened:
+    with open(_checked_path(file), "rb") as opened:
         return LegacyUnpickler(opened).load()
+
+
+def _checked_path(file):
+    """``file`` if it names a file; ``open`` would take an int as a file descriptor."""
+    if not isinstance(file, str | bytes | os.PathLike):
+        raise TypeError(
+            "file must be a path (str or path-like) or a binary file object; "
+            f"got {type(file).__name__}."
+        )
+    return file
 
 
 def _renamed_nodes(node):
@@ -200,7 +211,7 @@ def _current_skops_bytes(file):
     if hasattr(file, "read"):
         data = file.read()
     else:
-        with open(file, "rb") as opened:
+        with open(_checked_path(file), "rb") as opened:
             data = opened.read()
     renamed = io.BytesIO()
     with (

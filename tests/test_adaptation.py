@@ -109,7 +109,8 @@ def test_adapted_models_round_trip_through_json_and_pickle(fitted, tmp_path):
     "kwargs, match",
     [
         ({"parameters": "mx"}, "parameters"),
-        ({"relevance": 0.0}, "relevance"),
+        ({"relevance": -1e-9}, "relevance"),
+        ({"relevance": 0.0, "parameters": "mv"}, "parameters"),
         ({"n_iter": 0}, "n_iter"),
     ],
 )
@@ -253,9 +254,14 @@ def test_adapt_refuses_rows_of_y_or_groups_without_rows_of_x(fitted):
     [
         ({"relevance": "16"}, "relevance"),
         ({"relevance": True}, "relevance"),
-        ({"relevance": 0.0}, "relevance"),
-        ({"relevance": np.inf}, "relevance"),
+        ({"relevance": -1.0}, "relevance"),
+        ({"relevance": -np.inf}, "relevance"),
         ({"relevance": np.nan}, "relevance"),
+        ({"relevance": "Auto"}, "relevance"),
+        ({"relevance": None}, "relevance"),
+        ({"parameters": "auto "}, "parameters"),
+        ({"parameters": None}, "parameters"),
+        ({"parameters": ["m", "v"]}, "parameters"),
         ({"n_iter": None}, "n_iter"),
         ({"n_iter": np.inf}, "n_iter"),
         ({"n_iter": 2.5}, "n_iter"),
@@ -292,12 +298,14 @@ def test_score_names_a_missing_target():
         model.score(X, y)
 
 
-def test_the_defaults_adapt_means_and_covariances_with_relevance_256(fitted):
-    """#37: the defaults chosen by benchmarks/bench_adapt_defaults.py."""
+def test_the_defaults_choose_the_strength_and_adapt_with_the_choice(fitted):
+    """#48: relevance and parameters default to "auto"; the chosen pair then adapts."""
     X, y = _data(300, 5, offset=0.5)
     default = _copy(fitted).adapt(X, y, n_iter=3)
-    explicit = _copy(fitted).adapt(X, y, relevance=256.0, parameters="mv", n_iter=3)
-    assert np.array_equal(default.means_, explicit.means_)
+    chosen = default.adaptation_[default.adaptation_["chosen"]].iloc[0]
+    relevance, parameters = chosen["relevance"], chosen["parameters"]
+    assert relevance < np.inf  # an offset of 0.5 is far
+    explicit = _copy(fitted).adapt(X, y, relevance=relevance, parameters=parameters, n_iter=3)
+    assert explicit.adaptation_ is None
+    assert np.array_equal(default.predict(X), explicit.predict(X))
     assert np.array_equal(default.covars_, explicit.covars_)
-    assert np.array_equal(default.transmat_, fitted.transmat_)  # transitions stay
-    assert not np.allclose(default.covars_, fitted.covars_)

@@ -249,7 +249,8 @@ def test_lane_keeping_metrics_refuse_bad_input():
         lane_keeping_metrics(frame, vehicle_width=3.5)
     with pytest.raises(ValueError, match="needs the time|no 'time'"):
         lane_keeping_metrics(frame.drop(columns="time"))
-    with pytest.raises(TypeError, match="'frame' parameter .* 'pandas.DataFrame'"):
+    # pandas 2.0 names the class by its defining module, pandas.core.frame
+    with pytest.raises(TypeError, match=r"'frame' parameter .* 'pandas\.(core\.frame\.)?DataFrame"):
         lane_keeping_metrics(frame.to_numpy())
 
 

@@ -284,6 +284,24 @@ def test_fit_on_cluster_keeps_the_read_out(cluster, fit_data):
     )
 
 
+@pytest.mark.parametrize(
+    ("params", "named"),
+    [
+        ({"n_states": 0}, "n_states"),
+        ({"tol": -1.0}, "tol"),
+        ({"covariance_type": "round"}, "covariance_type"),
+    ],
+)
+def test_fit_on_cluster_checks_the_parameters_as_fit_does(fit_data, params, named):
+    # refused before any client is looked for or any partition read, naming the parameter
+    from sklearn.utils._param_validation import InvalidParameterError
+
+    with pytest.raises(InvalidParameterError, match=f"'{named}' parameter"):
+        fit_on_cluster(HMMGMRRegressor(**params), [fit_data], features=["f0"], client=object())
+    with pytest.raises(InvalidParameterError, match=f"'{named}' parameter"):
+        HMMGMRRegressor(**params).fit(fit_data[["f0"]], fit_data["driver_torque"])
+
+
 def test_select_command_on_a_scheduler_writes_the_local_tables(cluster, tmp_path, capsys):
     pytest.importorskip("matplotlib")
     from skhmmgmr.cli import main

@@ -116,8 +116,8 @@ def test_loader_without_the_extra_uses_the_table(without_extra):
 @pytest.mark.parametrize(
     "options, match",
     [
-        ({"steering": "openpilot"}, "steering must be one of"),
-        ({"steering": None}, "steering must be one of"),
+        ({"steering": "openpilot"}, "'steering' parameter of load_comma2k19_segment"),
+        ({"steering": None}, "'steering' parameter of load_comma2k19_segment"),
         ({"min_span": -1.0}, "min_span"),
         ({"min_span": np.nan}, "min_span"),
         ({"min_span": True}, "min_span"),

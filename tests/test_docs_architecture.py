@@ -2,18 +2,21 @@
 
 Every module of the package is named on the page, in the section of the top-level entry (a
 subpackage or a module of ``skhmmgmr/``) that holds it; every entry has its section; the
-sections come in the order of ``tests/test_package_layers.py``'s layers, lowest first.
+sections come in the order of ``tests/test_package_layers.py``'s layers, lowest first, and the
+drawing of the floors shows those layers.
 """
 
 import re
 from pathlib import Path
 
-from test_package_layers import RANK
+from test_package_layers import LAYERS, RANK
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "architecture.rst"
 MODULE = re.compile(r"``(skhmmgmr/[\w/]+\.py)``")
 HEADING = re.compile(r"^``skhmmgmr/(\w+)(?:/|\.py)``: .+\n-+$", re.MULTILINE)
+FLOOR = re.compile(r"^   floor +(\d+) ", re.MULTILINE)
+ENTRY = re.compile(r"(?:skhmmgmr/)?(\w+)(?:/|\.py)")
 
 
 def named_modules():
@@ -54,6 +57,28 @@ def test_the_sections_are_the_subpackages_in_the_order_of_the_layers():
         for module in MODULE.findall(text):
             if _entry_of(module) not in {"_version", "legacy", "__main__"}:
                 assert _entry_of(module) == entry, f"{module} is named in the {entry} section"
+
+
+def drawn_floors():
+    """{floor: entries} of the drawing of the floors (its first code block): the entries of a
+    floor are those its lines name (folders ``name/``, modules ``name.py``), the lines that
+    follow a ``floor N`` line included."""
+    text = PAGE.read_text()
+    start = text.index(".. code-block:: text")
+    block = text[start : text.index("\n\n", text.index("floor", start))]
+    floors, current = {}, None
+    for line in block.splitlines():
+        found = FLOOR.match(line)
+        if found:
+            current = int(found.group(1))
+            floors[current] = set()
+        if current is not None:
+            floors[current].update(ENTRY.findall(line))
+    return floors
+
+
+def test_the_drawing_of_the_floors_is_the_layers_of_the_layers_test():
+    assert drawn_floors() == {floor: set(layer) for floor, layer in enumerate(LAYERS)}
 
 
 def test_the_page_is_in_the_docs_table_of_contents():

@@ -17,10 +17,12 @@ from skhmmgmr._hmm._emissions import FullCovariance
 from skhmmgmr._hmm._gaussian import (
     PAIR_BUFFER_VALUES,
     MomentSums,
+    NotPositiveDefiniteError,
     augmented_columns,
     compute_precision_cholesky,
     estimate_log_gaussian_prob,
     gaussians_from_moments,
+    one_blas_thread,
     stack_gaussians,
     weighted_moments,
 )
@@ -63,6 +65,44 @@ def test_log_prob_matches_scipy_for_any_chunk_size(chunk_size):
         [multivariate_normal(m, c).logpdf(X) for m, c in zip(means, covariances, strict=True)]
     )
     np.testing.assert_allclose(log_prob, expected, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("n_states, n_features", [(1, 1), (5, 6), (3, 10)])
+def test_precision_cholesky_is_the_inverse_transposed_cholesky_factor(n_states, n_features):
+    rng = np.random.default_rng(n_features)
+    _, covariances = random_gaussians(rng, n_states, n_features)
+    covariances[0] *= 1e-6  # a small scale too
+    precisions_chol = compute_precision_cholesky(covariances)
+    for covariance, factor in zip(covariances, precisions_chol, strict=True):
+        expected = np.linalg.inv(np.linalg.cholesky(covariance)).T
+        scale = np.abs(expected).max()
+        np.testing.assert_allclose(factor, expected, rtol=1e-12, atol=1e-12 * scale)
+        assert np.all(np.tril(factor, -1) == 0.0)  # upper triangular, exactly
+        np.testing.assert_allclose(factor @ factor.T @ covariance, np.eye(n_features), atol=1e-9)
+
+
+def test_precision_cholesky_names_the_state_that_cannot_be_factorised():
+    _, covariances = random_gaussians(np.random.default_rng(3), 3, 2)
+    covariances[1] = [[1.0, 2.0], [2.0, 1.0]]  # indefinite
+    with pytest.raises(NotPositiveDefiniteError, match="covariance of state 1 "):
+        compute_precision_cholesky(covariances)
+    covariances[1] = np.nan
+    with pytest.raises(ValueError, match="covariance of state 1 holds NaN or infinity"):
+        compute_precision_cholesky(covariances)
+
+
+def test_nested_one_blas_thread_keeps_the_limit_until_the_outer_context_ends():
+    from threadpoolctl import threadpool_info
+
+    def blas_threads():
+        return [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
+
+    before = blas_threads()
+    with one_blas_thread():
+        with one_blas_thread():
+            assert set(blas_threads()) <= {1}
+        assert set(blas_threads()) <= {1}  # the inner context left the limit in place
+    assert blas_threads() == before
 
 
 @pytest.mark.parametrize("chunk_size", [1, 13, None])

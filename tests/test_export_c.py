@@ -483,7 +483,9 @@ def test_refused_at_export_time(protocol, tmp_path):
         write_c(scaled, tmp_path)
     with pytest.raises(TypeError, match="HMMGMRRegressor"):
         write_c(StandardScaler(), tmp_path)
-    for name in ("", "2fast", "my-model", "_model", "modèle", None):
+    with pytest.raises(TypeError, match="'name' parameter of write_c"):
+        write_c(model, tmp_path, name=None)
+    for name in ("", "2fast", "my-model", "_model", "modèle"):
         with pytest.raises(ValueError, match="C identifier"):
             write_c(model, tmp_path, name=name)
     with pytest.raises(ValueError, match="'float64' or 'float32'"):
@@ -526,7 +528,7 @@ def test_output_files_follow_the_packages_one_rule(tmp_path):
     (tmp_path / "file").write_text("")
     with pytest.raises(NotADirectoryError, match="directory"):
         write_c(model, tmp_path / "file", name="m")
-    with pytest.raises(TypeError, match="overwrite must be True or False"):
+    with pytest.raises(TypeError, match="'overwrite' parameter of write_c must be an instance of"):
         write_c(model, folder, name="m", overwrite="yes")
 
 

@@ -137,3 +137,13 @@ def test_a_0_1_0_skops_file_loads_with_its_trusted_types_and_predicts_the_same(e
     mean, std = model.predict(X, groups=groups, return_std=True)
     assert_same(mean, expected, "carry_forward_direct_mean")
     assert_same(std, expected, "carry_forward_direct_std")
+
+
+@pytest.mark.parametrize("file", [3, 2.5, None, ["a.pkl"]])
+def test_the_legacy_loaders_refuse_what_names_no_file(file):
+    # open(3) would read file descriptor 3
+    from skhmmgmr.legacy import load_pickle, load_skops, untrusted_skops_types
+
+    for loader in (load_pickle, load_skops, untrusted_skops_types):
+        with pytest.raises(TypeError, match="file must be a path .* or a binary file object"):
+            loader(file)

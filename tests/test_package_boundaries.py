@@ -49,6 +49,9 @@ ALLOWED_PRIVATE_ACCESS: set[tuple[str, str]] = {
     # --sampling-period...) by that parameter's own constraint when it parses it, so that the
     # command line and the API refuse the same values alike, with no rule restated.
     ("_options.py", "_parameter_constraints"),
+    # fit_on_cluster fits an estimator without calling its fit: it checks the estimator's
+    # parameters against the class's own constraints first, as fit does.
+    ("_dask.py", "_parameter_constraints"),
 }
 
 

@@ -41,6 +41,9 @@ RANK = {entry: rank for rank, layer in enumerate(LAYERS) for entry in layer}
 #: by the ground floor's pickles as by the model file).
 LEAVES = {"_version"}
 MAX_TOP_LEVEL_ENTRIES = 20
+#: No module of the package is longer (its lines, docstrings and comments included): a module
+#: that would grow beyond it holds two ideas, split by idea.
+MAX_MODULE_LINES = 600
 
 #: Inside a family, its private sub-folders are floors too, lowest first: a module of the
 #: family imports its own sub-folder and those below it, and the rest of the family (its root,
@@ -147,6 +150,16 @@ def test_every_top_level_entry_has_a_layer():
         f"layers naming no entry: {sorted(set(RANK) - entries)}"
     )
     assert len(entries) <= MAX_TOP_LEVEL_ENTRIES
+
+
+def test_no_module_is_over_the_size_of_one_idea():
+    sizes = {
+        str(path.relative_to(PACKAGE.parent)): len(path.read_text().splitlines())
+        for path in PACKAGE.rglob("*.py")
+    }
+    assert len(sizes) > 100 and sizes["skhmmgmr/__init__.py"] > 0  # the rule reads the package
+    over = {path: n for path, n in sorted(sizes.items()) if n > MAX_MODULE_LINES}
+    assert not over, f"modules over {MAX_MODULE_LINES} lines (split them by idea): {over}"
 
 
 def test_no_module_imports_its_own_layer_or_a_higher_one():

@@ -141,15 +141,17 @@ def test_unsorted_repeated_and_missing_times_name_recording_and_row(times, messa
 def test_bad_arguments_are_named():
     frame = _log()
     for rate in (0, -10.0, np.nan, True, "10"):
-        with pytest.raises(ValueError, match="sampling_rate must be a positive number"):
+        with pytest.raises(ValueError, match="'sampling_rate' parameter of resample_recordings"):
             resample_recordings(frame, rate, max_gap=1.0)
-    for gap in (0.05, 0, np.nan):
+    for gap in (0.05, 0, -1.0):
         with pytest.raises(ValueError, match=r"max_gap must be at least one sampling period"):
             resample_recordings(frame, 10.0, max_gap=gap)
-    with pytest.raises(ValueError, match="max_gap must be a number of seconds"):
-        resample_recordings(frame, 10.0, max_gap="1 s")
-    with pytest.raises(ValueError, match="min_length must be at least 1"):
-        resample_recordings(frame, 10.0, max_gap=1.0, min_length=0)
+    for gap in ("1 s", np.nan, True):
+        with pytest.raises(ValueError, match="'max_gap' parameter of resample_recordings"):
+            resample_recordings(frame, 10.0, max_gap=gap)
+    for length in (0, 2.0, True):
+        with pytest.raises(ValueError, match="'min_length' parameter of resample_recordings"):
+            resample_recordings(frame, 10.0, max_gap=1.0, min_length=length)
     with pytest.raises(ValueError, match=r"lacks the column\(s\) \['t'\]"):
         resample_recordings(frame, 10.0, max_gap=1.0, time="t")
     with pytest.raises(ValueError, match="rows of a recording must be contiguous"):

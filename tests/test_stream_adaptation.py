@@ -171,7 +171,11 @@ def test_multi_output_streams_adapt():
 
 @pytest.mark.parametrize(
     "kwargs, match",
-    [({"relevance": 0.0}, "relevance"), ({"relevance": 4.0, "forgetting": 0.0}, "forgetting")],
+    [
+        ({"relevance": 0.0}, "relevance"),
+        ({"relevance": 4.0, "forgetting": 0.0}, "forgetting"),
+        ({"relevance": "auto"}, r"no relevance='auto'.*adapt\(\)"),
+    ],
 )
 def test_bad_adaptation_arguments(model, kwargs, match):
     with pytest.raises(ValueError, match=match):

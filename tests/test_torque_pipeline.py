@@ -541,6 +541,10 @@ def test_adapt_through_the_pipeline_adapts_the_regressor(fitted_pipeline, routin
     np.testing.assert_allclose(pipeline[-1].means_, reference.means_, rtol=0, atol=1e-10)
     np.testing.assert_allclose(pipeline[-1].covars_, reference.covars_, rtol=0, atol=1e-10)
     assert pipeline[-1].log_likelihood_ == pytest.approx(reference.log_likelihood_, abs=1e-8)
+    # by default the regressor's "auto" chooses on the derived rows, as the regressor alone
+    auto = copy.deepcopy(fitted_pipeline).adapt(X_new, y_new, groups=groups_new)
+    alone = copy.deepcopy(fitted_pipeline[-1]).adapt(derived, y_new, groups=groups_new)
+    pd.testing.assert_frame_equal(auto[-1].adaptation_, alone.adaptation_, rtol=1e-9)
     # no rows: nothing changes; rows that disagree with y are refused by the regressor
     model = pipeline[-1].model_
     assert pipeline.adapt(X.iloc[:0], y[:0]) is pipeline and pipeline[-1].model_ is model

@@ -13,7 +13,8 @@ from ._panel import RecordingLayout, recordings_of
 
 # Parameters of the methods that adapt a fitted model or forecast with it (not estimator
 # parameters, so that they are checked where they are passed): one set of constraints, so that
-# a stream, adapt and predict_ahead refuse the same values with the same message.
+# a stream, adapt and predict_ahead refuse the same values with the same message. The
+# relevance is a stream's; adapt's also takes inf, 0 and "auto" (estimator/_adaptation_choice).
 ADAPTATION_CONSTRAINTS = {
     "relevance": [Interval(numbers.Real, 0, None, closed="neither")],
     "forgetting": [Interval(numbers.Real, 0, 1, closed="right")],

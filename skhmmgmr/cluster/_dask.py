@@ -24,6 +24,7 @@ import numpy as np
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_random_state
 
+from .._core._compat import validate_parameter_constraints
 from .._core._schema import TARGET
 from .._core._validation import check_column_scales, check_enough_rows
 from .._hmm._em import EMResult, HMMParameters, em_failure, m_step
@@ -228,6 +229,12 @@ def _fit_spread(client, shards, counts, estimator):
 
 
 def _check_supported(estimator):
+    # the checks of ``fit``: fit_on_cluster never calls it
+    validate_parameter_constraints(
+        type(estimator)._parameter_constraints,
+        estimator.get_params(deep=False),
+        caller_name=type(estimator).__name__,
+    )
     emission_family(estimator.covariance_type)
     if estimator.init_params == "random":
         raise ValueError(

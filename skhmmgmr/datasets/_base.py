@@ -4,9 +4,14 @@ import os
 import shutil
 from pathlib import Path
 
+from .._core._compat import validate_params
+
 DATA_HOME_ENV = "SKHMMGMR_DATA"
+#: What ``data_home`` may be, for every function that takes it.
+DATA_HOME = [str, os.PathLike, None]
 
 
+@validate_params({"data_home": DATA_HOME}, prefer_skip_nested_validation=True)
 def get_data_home(data_home=None):
     """Return the folder where skhmmgmr caches downloaded datasets, creating it if needed.
 
@@ -40,6 +45,7 @@ def get_data_home(data_home=None):
     return str(data_home)
 
 
+@validate_params({"data_home": DATA_HOME}, prefer_skip_nested_validation=True)
 def clear_data_home(data_home=None):
     """Delete the cache folder and everything in it.
 

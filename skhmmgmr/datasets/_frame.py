@@ -174,16 +174,16 @@ def time_order(recording, time=None):
 MAX_SAMPLING_RATE = 1000.0
 
 
-def check_rate(sampling_rate, *, optional=False, why=""):
-    """Refuse a sampling rate that is not a positive, finite number of Hz (a bool included), or
-    is above :data:`MAX_SAMPLING_RATE`; return it as a float (or None).
+def check_rate(sampling_rate, *, why=""):
+    """Refuse a sampling rate above :data:`MAX_SAMPLING_RATE`; return it as a float (or None).
+
+    The rate is a positive, finite number of Hz (or None) already: the public functions that
+    take it say so in their ``validate_params``.
 
     Parameters
     ----------
-    sampling_rate : float
+    sampling_rate : float or None
         The rate to check [Hz].
-    optional : bool, default=False
-        Whether None is accepted.
     why : str, default=""
         What a faster rate would do with this source, added to the error of a rate above the
         bound.
@@ -193,18 +193,8 @@ def check_rate(sampling_rate, *, optional=False, why=""):
     ValueError
         Naming the rate given.
     """
-    if optional and sampling_rate is None:
+    if sampling_rate is None:
         return None
-    if (
-        isinstance(sampling_rate, (bool, np.bool_))
-        or not isinstance(sampling_rate, (int, float, np.number))
-        or not np.isfinite(sampling_rate)
-        or sampling_rate <= 0
-    ):
-        either = "None or " if optional else ""
-        raise ValueError(
-            f"sampling_rate must be {either}a positive number of Hz, got {sampling_rate!r}."
-        )
     if sampling_rate > MAX_SAMPLING_RATE:
         raise ValueError(
             f"sampling_rate must be at most {MAX_SAMPLING_RATE:g} Hz, got {sampling_rate!r}: "

@@ -20,9 +20,12 @@ transition matrix, ``alpha_t A^h``, and mixes per-state outputs (see
 :meth:`AdaptMixin.predict_ahead`).
 """
 
+import warnings
 from dataclasses import replace
 
 import numpy as np
+from sklearn.base import clone
+from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils.validation import check_is_fitted
 
 from .._core._validation import (
@@ -32,22 +35,21 @@ from .._hmm._em import HMMParameters, e_step
 from .._hmm._em_data import Columns, EStepData
 from .._hmm._fitted import FittedHMMGMR
 from .._hmm._gaussian import NotPositiveDefiniteError
-from .._hmm._gmr import causal_filter, gmr_estimates, mix_estimates
+from .._hmm._gmr import causal_filter, gmr_estimates, mix_estimates, read_missing
 from .._hmm._missing import observed_counts
 from .._hmm._readout import ahead_weights, smooth_outputs
+from .._hmm._stale_inputs import stale_noise_for
+from ._adaptation_choice import (
+    AUTO,
+    candidates,
+    check_strength,
+    choose,
+    chunk_ids,
+    confirm_fresh_fit,
+    recording_folds,
+    time_folds,
+)
 from ._prediction_inputs import read_inputs, read_joint_inputs
-
-ADAPTED_PARAMETERS = frozenset("mvt")
-
-
-def check_parameters(parameters):
-    """The set of adapted parameters of a string of "m", "v" and "t"."""
-    if not isinstance(parameters, str) or not set(parameters) <= ADAPTED_PARAMETERS:
-        raise ValueError(
-            f"parameters must be a string of 'm' (means), 'v' (covariances) and 't' "
-            f"(transitions), got {parameters!r}"
-        )
-    return set(parameters)
 
 
 def map_step(stats, prior, relevance, parameters, reg_covar=0.0):
@@ -88,8 +90,12 @@ def adapt_parameters(
     Returns ``(parameters, history, n_done, converged)``; ``history`` holds the log-likelihood
     (standardised units) of the parameters before every M-step, then of the returned ones.
     Converged: the log-likelihood changed by less than ``tol`` per row between two E-steps.
+    With no ``parameters`` or ``relevance=inf`` nothing moves: ``prior`` itself, after no
+    iteration.
     """
     engine = EStepData(columns, recordings, prior.n_states)
+    if not parameters or relevance == np.inf:  # nothing moves: one E-step for the likelihood
+        return prior, [e_step(engine, prior).log_likelihood], 0, True
     n_samples = columns.n_samples
     params, history, converged, n_done = prior, [], False, 0
     for _ in range(n_iter):
@@ -108,7 +114,9 @@ def adapt_parameters(
 class AdaptMixin:
     """``adapt`` (MAP adaptation to new recordings) and ``predict_ahead`` (forecasts)."""
 
-    def adapt(self, X, y, groups=None, *, relevance=256.0, parameters="mv", n_iter=10, time=None):
+    def adapt(
+        self, X, y, groups=None, *, relevance="auto", parameters="auto", n_iter=10, time=None
+    ):
         """Adapt the fitted model to new recordings by maximum a posteriori (MAP) EM.
 
         The fitted parameters are the prior, as in GMM-UBM speaker adaptation (Reynolds et
@@ -118,6 +126,25 @@ class AdaptMixin:
         so that a state seen in fewer than about ``r`` rows stays near its fitted value.
         Covariances ("v") and transitions ("t") adapt by the analogous rules (see
         :doc:`/user_guide/adaptation`); the other parameters keep their fitted values.
+
+        By default (``relevance="auto"``, ``parameters="auto"``) the new recordings choose how
+        far the model moves. Every recording is cut in time into eight blocks; the model is
+        adapted to seven of them and estimates the eighth, in turn, for "do not adapt"
+        (``relevance=inf``), for the means and covariances ("mv") at a relevance of 4096,
+        1024, 256, 64, 16 and 4, and for a fresh fit of the estimator on the recordings
+        alone (``relevance=0``). A candidate's held-out error is the root mean squared error
+        of its estimate in every tenth of a held-out block, averaged. Among the candidates
+        that keep the fitted model as a prior, the strongest within two standard errors of
+        the best score is chosen (the one-standard-error rule, towards the fitted model). The
+        fresh fit replaces it only on clear evidence: ahead of it by half a standard error
+        of their paired differences on the blocks, and not behind it by more than one with
+        each recording held out in turn (with a single recording: a score a tenth lower).
+        The choice then adapts to all the rows; ``adaptation_`` keeps the table. A driver
+        like the fitted model's keeps it as it is; one far from it moves it as far as the
+        held-out rows support, up to a model of its own. The choice costs about 55 single
+        adaptations (8 folds of 6 MAP EM runs and a fit, each followed by a prediction; two
+        per recording more when the fresh fit leads): 1-4 s for 1-5 minutes at 20 Hz, K=5, 5
+        inputs (see :doc:`/user_guide/adaptation`).
 
         This is not ``partial_fit``: in scikit-learn ``partial_fit`` learns incrementally
         towards the fit of all the data seen so far, whereas ``adapt`` treats the fitted
@@ -133,21 +160,27 @@ class AdaptMixin:
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
         groups : array-like of shape (n_samples,), default=None
             Recording id of every row.
-        relevance : float, default=256.0
-            Relevance factor ``r`` > 0: rows of evidence at which a state moves halfway from
-            its fitted parameters to those of the new data (256 rows: about 13 s at 20 Hz).
-            Small values approach plain (maximum likelihood) EM; ``r > 0`` keeps every
-            adapted covariance positive definite (``r S0`` is added to the scatter), even
-            for a state the new recordings never visit; the estimator's ``reg_covar`` is
-            added to its diagonal as in :meth:`fit`, so that this holds in floating point
-            too when ``r`` is so small that ``r S0`` vanishes beside the scatter.
-        parameters : str, default="mv"
+        relevance : float or "auto", default="auto"
+            Relevance factor ``r``: rows of evidence at which a state moves halfway from its
+            fitted parameters to those of the new data (256 rows: about 13 s at 20 Hz).
+            ``inf`` does not adapt; ``0`` fits the estimator anew on the new recordings alone
+            (every parameter, the fitted model not a prior; ``parameters`` "mvt" or "auto").
+            Small values approach plain (maximum likelihood) EM from the fitted parameters;
+            ``r > 0`` keeps every adapted covariance positive definite (``r S0`` is added to
+            the scatter), even for a state the new recordings never visit; the estimator's
+            ``reg_covar`` is added to its diagonal as in :meth:`fit`, so that this holds in
+            floating point too when ``r`` is so small that ``r S0`` vanishes beside the
+            scatter. "auto": chosen from the new recordings, as above. Set a number when the
+            adaptation must be quick (a few rows of a stream, a batch of many drivers) or
+            the same for every driver, or when the new recordings are not of the kind the
+            model will see (the choice scores the model on them).
+        parameters : str or "auto", default="auto"
             Which parameters adapt: any of "m" (means), "v" (covariances) and "t" (start and
-            transition probabilities), as hmmlearn's ``params``. The defaults ("mv", 256) won
-            ``benchmarks/bench_adapt_defaults.py`` (a generic model of two driver styles
-            adapted to 1, 2 and 5 minutes of the third, in the reference car and in drawn
-            cars): drivers differ in the slopes of the torque on the signals, which live in
-            the covariances; the transitions added nothing.
+            transition probabilities), as hmmlearn's ``params``; "" adapts nothing. "auto":
+            "mv" (drivers differ in the slopes of the torque on the signals, which live in
+            the covariances; the means alone and the transitions added nothing in
+            ``benchmarks/bench_adapt_defaults.py``), or a fresh fit when ``relevance`` is
+            "auto" too.
         n_iter : int, default=10
             Maximum number of MAP EM iterations; the estimator's ``tol`` stops them earlier.
         time : array-like of shape (n_samples,), default=None
@@ -156,9 +189,17 @@ class AdaptMixin:
         Returns
         -------
         self : HMMGMRRegressor
-            With a new ``model_`` (the previous one is not modified), and ``n_iter_``,
-            ``converged_``, ``log_likelihood_`` and ``log_likelihood_history_`` of the
-            adaptation (the log-likelihood of the new recordings).
+            With a new ``model_`` (the previous one is not modified; when nothing adapts,
+            the same ``model_``), and ``n_iter_``, ``converged_``, ``log_likelihood_`` and
+            ``log_likelihood_history_`` of the adaptation (the log-likelihood of the new
+            recordings), and ``adaptation_``: the table of the "auto" choice, one row per
+            candidate with ``parameters``, ``relevance`` (``inf``: not adapted; ``0``: a
+            fresh fit), ``validation_rmse`` (the error on held-out time blocks, in units of
+            the output's standard deviation at fit), ``validation_se`` (its standard
+            error), ``recordings_rmse`` (the error on held-out recordings, for the fresh fit
+            and the choice it was checked against; else NaN) and ``chosen``; None when
+            neither is "auto". After a fresh fit the
+            likelihood attributes are the fit's (``penalized_log_likelihood_`` among them).
 
         Examples
         --------
@@ -171,10 +212,13 @@ class AdaptMixin:
         >>> adapted = model.adapt(X[:100], y[:100] + 0.5, relevance=8.0)  # another driver
         >>> bool(adapted is model and model.model_ is not fitted)
         True
+        >>> choice = model.adapt(X[:200], y[:200] + 0.5).adaptation_  # how far: "auto"
+        >>> choice.columns.tolist()
+        ['parameters', 'relevance', 'validation_rmse', 'validation_se', 'recordings_rmse', 'chosen']
         """
         check_is_fitted(self)
-        adapted = check_parameters(parameters)
-        check_adaptation_params("adapt", relevance=relevance, n_iter=n_iter)
+        relevance, parameters = check_strength(relevance, parameters)
+        check_adaptation_params("adapt", n_iter=n_iter)
         if _n_rows(X) == 0:  # nothing to adapt to: the model and its fit attributes stay
             lengths = {"y": _n_rows(y), "groups": _n_rows(groups), "time": _n_rows(time)}
             extra = {name: n for name, n in lengths.items() if n}
@@ -186,36 +230,134 @@ class AdaptMixin:
             return self
         inputs = read_joint_inputs(self, X, y, groups, time, fitting=False)
         X, Y, recordings = inputs.X, inputs.Y, inputs.recordings
-        model = self.model_
-        scaling = model.standardization
-        columns = Columns.from_rows(scaling.joint(X, Y))
-        params, history, n_done, converged = adapt_parameters(
-            columns,
-            recordings,
-            model.hmm_parameters(),
-            relevance=float(relevance),
-            parameters=adapted,
-            n_iter=int(n_iter),
-            tol=self.tol,
-            reg_covar=self.reg_covar,
+        self.adaptation_ = None
+        if AUTO in (relevance, parameters):
+            pairs = candidates(relevance, parameters, fresh_fit=self._fits_anew)
+            self.adaptation_ = self._choose_adaptation(X, Y, recordings, pairs, int(n_iter))
+            chosen = self.adaptation_[self.adaptation_["chosen"]].iloc[0]
+            relevance, parameters = chosen["relevance"], chosen["parameters"]
+        if relevance == 0:
+            return self._fit_anew(X, Y, recordings)
+        model, prior = self.model_, self.model_.hmm_parameters()
+        params, history, n_done, converged = self._map_em(
+            X, Y, recordings, prior, relevance, parameters, int(n_iter)
         )
-        self.model_ = FittedHMMGMR.from_standardized(
-            params.startprob,
-            params.transmat,
-            params.emissions,
-            scaling,
-            scalar_output=model.scalar_output,
-            feature_names=model.feature_names,
-            stale_noise=model.stale_noise,
-            output_decay=model.output_decay,
-        )
-        jacobian = scaling.log_jacobian(observed_counts(X, Y))
+        if params is not prior:
+            self.model_ = _with_parameters(model, params)
+        jacobian = model.standardization.log_jacobian(observed_counts(X, Y))
         self.n_iter_, self.converged_ = n_done, converged
         self.log_likelihood_history_ = np.asarray(history) + jacobian
         self.log_likelihood_ = float(self.log_likelihood_history_[-1])
         # The penalised objective of fit does not apply to the adapted model.
         self.penalized_log_likelihood_ = self.penalized_log_likelihood_history_ = None
         return self
+
+    #: Whether ``relevance=0`` (a fresh fit on the adaptation recordings alone) is possible.
+    _fits_anew = True
+
+    def _fit_anew(self, X, Y, recordings):
+        """``adapt`` with ``relevance=0``: the model of a fresh fit with this estimator's
+        parameters on the rows, and the fit's attributes."""
+        if not self._fits_anew:
+            raise ValueError(
+                f"relevance=0 fits the model anew, which {type(self).__name__}.adapt cannot: "
+                "call fit; adapt takes relevance > 0."
+            )
+        fresh = self._fresh_fit(X, Y, recordings)
+        self.model_ = replace(fresh.model_, feature_names=self.model_.feature_names)
+        for name in FIT_ATTRIBUTES:
+            setattr(self, name, getattr(fresh, name))
+        return self
+
+    def _fresh_fit(self, X, Y, recordings, quiet=False):
+        """A clone of this estimator fitted on the rows ``X, Y`` of ``recordings``; ``quiet``:
+        without its convergence warning and messages (a candidate of the "auto" choice)."""
+        fresh = clone(self)
+        if quiet:
+            fresh.set_params(verbose=0)
+        with warnings.catch_warnings():
+            if quiet:
+                warnings.simplefilter("ignore", ConvergenceWarning)
+            y = Y[:, 0] if self.model_.scalar_output else Y
+            return fresh.fit(X, y, groups=recordings.row_ids())
+
+    def _map_em(self, X, Y, recordings, prior, relevance, parameters, n_iter):
+        """:func:`adapt_parameters` from ``prior`` on the rows ``X, Y`` of ``recordings``."""
+        return adapt_parameters(
+            Columns.from_rows(self.model_.standardization.joint(X, Y)),
+            recordings,
+            prior,
+            relevance=float(relevance),
+            parameters=set(parameters),
+            n_iter=n_iter,
+            tol=self.tol,
+            reg_covar=self.reg_covar,
+        )
+
+    def _candidate(self, X, Y, recordings, prior, relevance, parameters, n_iter):
+        """The fitted model of one candidate of the "auto" choice on the rows ``X, Y``."""
+        if relevance == 0:
+            return self._fresh_fit(X, Y, recordings, quiet=True).model_
+        params = self._map_em(X, Y, recordings, prior, relevance, parameters, n_iter)[0]
+        return self.model_ if params is prior else _with_parameters(self.model_, params)
+
+    def _choose_adaptation(self, X, Y, recordings, pairs, n_iter):
+        """The table of the "auto" choice among ``pairs`` on the rows ``X, Y`` of
+        ``recordings`` (:mod:`~skhmmgmr.estimator._adaptation_choice`): every candidate on
+        the time folds, then the choice and the fresh fit on held-out recordings when the
+        fresh fit leads on the time folds."""
+        errors, counts = self._held_out_errors(X, Y, time_folds(recordings), pairs, n_iter)
+        table, confirm = choose(pairs, errors, counts)
+        if not confirm:
+            return table
+        folds = recording_folds(recordings)
+        if not folds:
+            return confirm_fresh_fit(table)
+        chosen = pairs[int(np.flatnonzero(table["chosen"])[0])]
+        errors, counts = self._held_out_errors(X, Y, folds, [chosen, pairs[-1]], n_iter)
+        return confirm_fresh_fit(table, errors, counts)
+
+    def _held_out_errors(self, X, Y, folds, pairs, n_iter):
+        """The sums of squared errors (n_pairs, n_chunks) of every candidate of ``pairs``
+        adapted on each fold's rows, per chunk of its held-out rows (NaN where a candidate
+        could not adapt), and the entries of every chunk; in units of the fitted model's
+        standardised outputs, rows whose target is missing left out."""
+        model = self.model_
+        prior = model.hmm_parameters()
+        errors, counts = [np.zeros((len(pairs), 0))], [np.zeros(0, dtype=int)]
+        for adapt_rows, adapt_recordings, held_rows, held_recordings in folds:
+            held_X, held_Y, chunks = X[held_rows], Y[held_rows], chunk_ids(held_recordings)
+            observed = ~np.isnan(held_Y)
+            counts.append(np.bincount(chunks, observed.sum(axis=1)))
+            fold = np.full((len(pairs), counts[-1].size), np.nan)
+            for i, (parameters, relevance) in enumerate(pairs):
+                try:
+                    candidate = self._candidate(
+                        X[adapt_rows],
+                        Y[adapt_rows],
+                        adapt_recordings,
+                        prior,
+                        relevance,
+                        parameters,
+                        n_iter,
+                    )
+                except ValueError:  # too few rows, a covariance not positive definite: no score
+                    continue
+                # A fresh fit has a standardisation of its own: each candidate reads the rows
+                # as predict does, the errors in units of the fitted model's outputs.
+                standardized = candidate.standardization.inputs(held_X)
+                noise = stale_noise_for(candidate, self.missing_values)
+                missing = read_missing(standardized, held_recordings, noise)
+                estimate = candidate.predict_outputs(
+                    standardized,
+                    held_recordings,
+                    missing=missing,
+                    min_log_density=self.min_log_density,
+                )[0]
+                error = (estimate - held_Y) / model.standardization.output_scale
+                fold[i] = np.bincount(chunks, np.sum(np.where(observed, error, 0.0) ** 2, axis=1))
+            errors.append(fold)
+        return np.hstack(errors), np.concatenate(counts)
 
     def predict_ahead(
         self, X, steps, groups=None, time=None, *, state_output="marginal", return_std=False
@@ -329,9 +471,34 @@ class AdaptMixin:
         return estimate
 
 
+# The attributes a fit sets beside ``model_``, which a fresh fit (``relevance=0``) hands on.
+FIT_ATTRIBUTES = (
+    "n_iter_",
+    "converged_",
+    "log_likelihood_",
+    "log_likelihood_history_",
+    "penalized_log_likelihood_",
+    "penalized_log_likelihood_history_",
+)
+
+
 def _n_rows(values):
     """Number of rows of an array-like, 0 for None."""
     return 0 if values is None else len(values)
+
+
+def _with_parameters(model, params):
+    """``model`` (a :class:`FittedHMMGMR`) with the HMM ``params`` (standardised units)."""
+    return FittedHMMGMR.from_standardized(
+        params.startprob,
+        params.transmat,
+        params.emissions,
+        model.standardization,
+        scalar_output=model.scalar_output,
+        feature_names=model.feature_names,
+        stale_noise=model.stale_noise,
+        output_decay=model.output_decay,
+    )
 
 
 def transition_power(transmat, steps):

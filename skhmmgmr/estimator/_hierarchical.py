@@ -45,6 +45,11 @@ class HierarchicalHMMGMRRegressor(HMMGMRRegressor):
     unlabelled rows, keeping the block structure. Without labels, the rows are first
     labelled by k-means on ``[X, y]`` (one cluster per manoeuvre) and EM runs from there.
 
+    :meth:`~HMMGMRRegressor.adapt` works as the flat model's, except that its "auto" choice is
+    among "do not adapt" and MAP adaptations of the means and covariances (the transitions, and
+    so the manoeuvres' structure, stay): a fresh fit (``relevance=0``) needs the manoeuvre
+    labels, which ``adapt`` does not take; call ``fit`` for one.
+
     Read more in the user guide, "Manoeuvres as a hierarchy".
 
     Parameters
@@ -187,6 +192,9 @@ output_smoothing_
         self.min_log_density = min_log_density
         self.random_state = random_state
         self.verbose = verbose
+
+    # A fresh fit needs the manoeuvres' labels: adapt's "auto" chooses among MAP adaptations.
+    _fits_anew = False
 
     # -- the structure: manoeuvre names and their states ----------------------------------------
     def _set_structure(self, names, sizes):

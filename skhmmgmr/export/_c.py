@@ -7,14 +7,26 @@ anything is written (a missing folder is created, an existing file is replaced o
 ``overwrite=True``), each written to an exclusively created temporary file renamed into place.
 """
 
+import os
 from pathlib import Path
 
+from .._core._compat import validate_params
 from .._core._files import check_output_paths, write_atomically
 from ._c_header import header
 from ._c_source import source
 from ._model import check_dtype, check_name, read_filter
 
 
+@validate_params(
+    {
+        "fitted": "no_validation",  # refused by read_filter, saying why
+        "directory": [str, os.PathLike],
+        "name": [str],
+        "dtype": "no_validation",  # a name or a NumPy type, read by check_dtype
+        "overwrite": ["boolean"],
+    },
+    prefer_skip_nested_validation=True,
+)
 def write_c(fitted, directory, *, name="skhmmgmr_model", dtype="float64", overwrite=False):
     """Write the causal filter of a fitted model as C99 source: ``<name>.h`` and ``<name>.c``.
 
@@ -99,8 +111,6 @@ def write_c(fitted, directory, *, name="skhmmgmr_model", dtype="float64", overwr
     ['steering.h', 'steering.c']
     """
     name, dtype = check_name(name), check_dtype(dtype)
-    if not isinstance(overwrite, bool):
-        raise TypeError(f"overwrite must be True or False, got {overwrite!r}")
     directory = Path(directory)
     paths = (directory / f"{name}.h", directory / f"{name}.c")
     check_output_paths(paths, overwrite=overwrite, option="directory")

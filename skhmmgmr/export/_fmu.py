@@ -20,17 +20,20 @@ import hashlib
 import importlib.util
 import io
 import math
-import numbers
+import os
 import shutil
 import subprocess
 import tempfile
 import uuid
 import zipfile
+from collections.abc import Mapping
 from dataclasses import replace
+from numbers import Real
 from pathlib import Path
 
 from sklearn.pipeline import Pipeline
 
+from .._core._compat import FiniteInterval, StrOptions, validate_params
 from .._core._files import check_output_paths, write_atomically
 from .._core._schema import TARGET
 from ._c import write_c
@@ -42,13 +45,6 @@ FMI_VERSIONS = ("2.0", "3.0")
 _FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden")
 _ENTRY_DATE = (1980, 1, 1, 0, 0, 0)
 _INSTALL_FMPY = "pip install 'skhmmgmr[fmu]'"
-
-
-def _fmi_version(fmi_version):
-    version = str(fmi_version)
-    if version not in FMI_VERSIONS:
-        raise ValueError(f"fmi_version must be '2.0' or '3.0', got {fmi_version!r}.")
-    return version
 
 
 def _model_identifier(name, path):
@@ -81,15 +77,6 @@ def _sampling_period(fitted, sampling_period):
                 "sampling_period=, or give the pipeline's SteeringFeatures a sampling_period."
             )
         return own
-    if (
-        not isinstance(sampling_period, numbers.Real)
-        or isinstance(sampling_period, bool)
-        or not math.isfinite(sampling_period)
-        or sampling_period <= 0
-    ):
-        raise ValueError(
-            f"sampling_period must be a positive finite number of seconds, got {sampling_period!r}."
-        )
     if own is not None and not math.isclose(own, sampling_period, rel_tol=1e-12):
         raise ValueError(
             f"sampling_period={sampling_period!r} is not the period the model's "
@@ -175,6 +162,20 @@ def _archive(entries):
     return buffer.getvalue()
 
 
+@validate_params(
+    {
+        "fitted": "no_validation",  # refused by read_filter, saying why
+        "path": [str, os.PathLike],
+        "fmi_version": [StrOptions(set(FMI_VERSIONS))],
+        "name": [str, None],
+        "sampling_period": [FiniteInterval(Real, 0, None, closed="neither"), None],
+        "output_names": [str, "array-like", None],
+        "units": [Mapping, None],
+        "binary": ["boolean"],
+        "overwrite": ["boolean"],
+    },
+    prefer_skip_nested_validation=True,
+)
 def write_fmu(
     fitted,
     path,
@@ -283,7 +284,6 @@ def write_fmu(
     ...     path.name
     'driver.fmu'
     """
-    fmi_version = _fmi_version(fmi_version)
     path = Path(path)
     if path.suffix != ".fmu":
         raise ValueError(f"path must name a .fmu file, got {str(path)!r}.")

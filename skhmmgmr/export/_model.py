@@ -30,6 +30,7 @@ from sklearn.exceptions import NotFittedError
 from sklearn.pipeline import Pipeline
 from sklearn.utils.validation import check_is_fitted
 
+from .._core._compat import InvalidParameterError
 from .._hmm._holds import check_min_log_density
 from ..estimator import HMMGMRRegressor
 from ..torque_pipeline import SteeringFeatures
@@ -257,9 +258,7 @@ def read_filter(fitted):
         coef=np.array(params.coef),
         intercept=np.array(params.intercept),
         conditional_variances=np.array(params.conditional_variances),
-        min_log_density=check_min_log_density(
-            getattr(regressor, "min_log_density", None), type(regressor).__name__
-        ),
+        min_log_density=_min_log_density(regressor),
         output_decay=np.array(model.output_decay),
     )
     for field in ("gating", "offsets", "norms", "coef", "intercept", "conditional_variances"):
@@ -276,6 +275,18 @@ STANDARD_HEADERS = frozenset(
     "stdalign stdarg stdatomic stdbit stdbool stdckdint stddef stdint stdio stdlib "
     "stdnoreturn string tgmath threads time uchar wchar wctype".split()
 )
+
+
+def _min_log_density(regressor):
+    """The regressor's ``min_log_density``, checked. Its error is a plain ValueError: the
+    exporter's ``validate_params`` would take an InvalidParameterError for one of its own
+    arguments and name the exporter in place of the regressor."""
+    try:
+        return check_min_log_density(
+            getattr(regressor, "min_log_density", None), type(regressor).__name__
+        )
+    except InvalidParameterError as exc:
+        raise ValueError(f"{exc} The model cannot be exported.") from exc
 
 
 def check_name(name):

@@ -34,6 +34,13 @@ from .._hmm._gmr import condition_on_inputs
 
 def check_adaptation(relevance, forgetting):
     """Validated ``(relevance, forgetting)``; ``relevance=None`` disables adaptation."""
+    if isinstance(relevance, str) and relevance == "auto":
+        raise ValueError(
+            "FilterStream takes no relevance='auto': adapt's choice scores every strength on "
+            "later rows of the recordings, which a stream has not seen yet. Adapt the model to "
+            "recorded minutes with adapt() (relevance='auto' by default) and stream the "
+            "adapted model, or give the stream a number."
+        )
     if relevance is None:
         check_adaptation_params("FilterStream", forgetting=forgetting)
     else:

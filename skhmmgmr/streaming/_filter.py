@@ -80,7 +80,9 @@ class FilterStream(PickleVersionMixin):
     relevance : float, default=None
         Online adaptation of the state means (see Notes): the relevance factor ``r`` > 0 of
         the MAP rule of :meth:`HMMGMRRegressor.adapt <skhmmgmr.HMMGMRRegressor.adapt>`.
-        ``None``: no adaptation, the stream is the fitted model's.
+        ``None``: no adaptation, the stream is the fitted model's. Not "auto": ``adapt``
+        chooses its strength on later rows of the recordings, which a stream has not seen
+        yet; adapt on recorded minutes and stream the adapted model instead.
     forgetting : float, default=1.0
         Forgetting factor in (0, 1] of the adaptation statistics, applied at every learned
         sample (memory of about ``1 / (1 - forgetting)`` samples); 1 forgets nothing.

@@ -225,3 +225,26 @@ def filtered_velocity(velocity, layout, sampling_period, time_constant):
     for start, stop in zip(recordings.starts, recordings.stops, strict=True):
         filtered[start:stop] = low_pass(velocity[start:stop], decay)
     return filtered
+
+
+def check_widths(widths, parameter, names_of):
+    """Refuse a basis (of ``parameter``, whose inputs ``names_of`` names) that is empty, holds
+    a width that is not a positive finite number, or two widths of one name."""
+    if not widths:
+        raise ValueError(f"{parameter}={widths!r} holds no width; give None for no such input.")
+    for width in widths:
+        if (
+            isinstance(width, bool)
+            or not isinstance(width, numbers.Real)
+            or not math.isfinite(width)
+            or width <= 0
+        ):
+            raise ValueError(
+                f"{parameter} must hold widths > 0; got {width!r} in {parameter}={widths!r}."
+            )
+    names = names_of(tuple(widths))
+    if len(set(names)) != len(names):
+        raise ValueError(
+            f"{parameter}={widths!r} repeats a width (to three significant digits, which "
+            f"name the inputs: {names})."
+        )

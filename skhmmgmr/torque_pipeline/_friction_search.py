@@ -43,6 +43,14 @@ import math
 import numpy as np
 import pandas as pd
 
+from ._derived_inputs import (
+    filtered_velocity,
+    friction_inputs,
+    friction_widths,
+    load_inputs,
+    recording_hysteresis,
+)
+
 AUTO = "auto"
 #: The widths [rad/s] a ladder of friction bands takes, a factor 2 apart: ``0.1 * 2**k``,
 #: from 0.1 / 1024 (below any velocity sensor's resolution) to 1.6 rad/s.
@@ -231,3 +239,59 @@ def _held_out_squares(trained, held_out, inputs, outputs):
     products, targets = held_out[np.ix_(inputs, inputs)], held_out[np.ix_(inputs, outputs)]
     squares = held_out[np.ix_(outputs, outputs)]
     return float(np.trace(squares - 2.0 * coef.T @ targets + coef.T @ products @ coef))
+
+
+def candidate_table(step, layout, values, y):
+    """The table of the ``"auto"`` choice of ``step`` (a ``SteeringFeatures`` in its ``fit``)
+    on rows in filter order: every candidate's validation RMSE (:func:`friction_search`), the
+    ladder of widths of ``"auto"`` read from each filter's velocity, that of the plays from
+    the angle."""
+    target = np.asarray(y, dtype=float).reshape(len(values), -1)
+    positions = step._sources()
+    loads = load_inputs(values, positions, step.load_columns, step.powers)
+    recordings = layout.recordings(len(values))
+    if step.friction_angle_ is None:
+        radii, plays = (), [(None, ())]
+    else:
+        angle = values[:, positions[step.angle_column]]
+        if step.friction_angle_ == AUTO:
+            radii = angle_ladder(angle, recordings)
+            plays = basis_windows(radii)
+        else:
+            radii = step.friction_angle_
+            plays = [(radii, tuple(range(len(radii))))]
+    hysteresis = list(recording_hysteresis(angle, layout, radii).values()) if radii else []
+    velocity = None
+    if step.friction_velocity is not None:
+        velocity = values[:, positions[step.friction_column]]
+    searched = []
+    for time_constant in search_filters(step.velocity_filter_, step.sampling_period_):
+        if velocity is None:
+            widths, bands = (), [(None, ())]
+        else:
+            filtered = velocity
+            if time_constant is not None:
+                filtered = filtered_velocity(velocity, layout, step.sampling_period_, time_constant)
+            if step.friction_velocity_ == AUTO:
+                widths = velocity_ladder(filtered)
+                bands = basis_windows(widths)
+            else:
+                widths = friction_widths(step.friction_velocity_)
+                bands = [(step.friction_velocity_, tuple(range(len(widths))))]
+        columns = list(friction_inputs(filtered, widths).values()) if widths else []
+        candidates = [
+            (
+                {"friction_velocity": band, "friction_angle": play},
+                (*band_columns, *(len(widths) + i for i in play_columns)),
+            )
+            for band, band_columns in bands
+            for play, play_columns in plays
+        ]
+        searched.append((time_constant, [*columns, *hysteresis], candidates))
+    return friction_search(
+        np.column_stack([values, *loads.values()]),
+        target,
+        layout.recordings(len(values)),
+        searched,
+        step._settings(),
+    )

@@ -289,12 +289,17 @@ class TorquePipeline(PickleVersionMixin, Pipeline):
         )
 
     @available_if(_final_step_has("adapt"))
-    def adapt(self, X, y, groups=None, *, relevance=256.0, parameters="mv", n_iter=10, time=None):
+    def adapt(
+        self, X, y, groups=None, *, relevance="auto", parameters="auto", n_iter=10, time=None
+    ):
         """Adapt the fitted regressor to new recordings (MAP EM); the transformers stay.
 
         ``X`` goes through the transformers first, ``groups`` handed to every step that
         requests it (with metadata routing on or off), then the regressor adapts as
-        :meth:`HMMGMRRegressor.adapt <skhmmgmr.HMMGMRRegressor.adapt>` does, in place.
+        :meth:`HMMGMRRegressor.adapt <skhmmgmr.HMMGMRRegressor.adapt>` does, in place: by
+        default the new recordings choose how far it moves, from not at all to a fresh fit
+        of the regressor on their derived rows (the table of the choice in
+        ``pipeline[-1].adaptation_``).
 
         Parameters
         ----------
@@ -303,10 +308,13 @@ class TorquePipeline(PickleVersionMixin, Pipeline):
         y : array-like of shape (n_samples,) or (n_samples, n_outputs)
         groups : array-like of shape (n_samples,), default=None
             Recording id of every row.
-        relevance : float, default=256.0
-            Relevance factor ``r`` > 0: rows of evidence at which a state moves halfway.
-        parameters : str, default="mv"
+        relevance : float or "auto", default="auto"
+            Relevance factor ``r``: rows of evidence at which a state moves halfway; ``inf``
+            does not adapt, ``0`` fits the regressor anew. "auto": chosen from the new
+            recordings.
+        parameters : str or "auto", default="auto"
             Which parameters adapt: any of "m" (means), "v" (covariances), "t" (transitions).
+            "auto": chosen with the relevance.
         n_iter : int, default=10
             Maximum number of MAP EM iterations.
         time : array-like of shape (n_samples,), default=None
@@ -316,7 +324,7 @@ class TorquePipeline(PickleVersionMixin, Pipeline):
         -------
         self : TorquePipeline
             With the regressor adapted (a new ``model_``, the previous one not modified; no
-            rows leave it unchanged).
+            rows, or the choice not to adapt, leave it unchanged).
 
         Examples
         --------
@@ -329,6 +337,8 @@ class TorquePipeline(PickleVersionMixin, Pipeline):
         >>> adapted = pipe.adapt(X[:200], y[:200] + 0.2, relevance=8.0)  # another driver
         >>> bool(adapted is pipe and pipe[-1].model_ is not fitted)
         True
+        >>> int(pipe.adapt(X[:400], y[:400] + 0.2)[-1].adaptation_["chosen"].sum())  # "auto"
+        1
         """
         options = {"relevance": relevance, "parameters": parameters, "n_iter": n_iter}
         if _n_rows(X) == 0:  # nothing to derive: the regressor checks y and groups, keeps its model

@@ -10,7 +10,6 @@ the velocity filter, read from the time index of the training recordings when it
 given.
 """
 
-import math
 import numbers
 
 import numpy as np
@@ -24,6 +23,7 @@ from .._core._panel import in_filter_order
 from .._core._pickled import PickleVersionMixin
 from .._core._sequences import median_time_step
 from ._derived_inputs import (
+    check_widths,
     derived_names,
     derived_units,
     filter_decay,
@@ -35,16 +35,7 @@ from ._derived_inputs import (
     load_inputs,
     recording_hysteresis,
 )
-from ._friction_search import (
-    AUTO,
-    RADIUS_GRID,
-    WIDTH_GRID,
-    angle_ladder,
-    basis_windows,
-    friction_search,
-    search_filters,
-    velocity_ladder,
-)
+from ._friction_search import AUTO, RADIUS_GRID, WIDTH_GRID, candidate_table
 
 
 @fill_shared_parameters
@@ -286,7 +277,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
                 )
         if AUTO not in (self.friction_velocity_, self.velocity_filter_, self.friction_angle_):
             return
-        self.friction_search_ = self._search(layout, values, y)
+        self.friction_search_ = candidate_table(self, layout, values, y)
         chosen = self.friction_search_[self.friction_search_["chosen"]].iloc[0]
         self.friction_velocity_ = _as_setting(chosen["friction_velocity"])
         self.friction_angle_ = _as_radii(chosen["friction_angle"])
@@ -295,62 +286,6 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             self.velocity_filter_ = None
         elif self.velocity_filter_ is not None:
             self.velocity_filter_ = float(self.velocity_filter_)
-
-    def _search(self, layout, values, y):
-        """The table of the ``"auto"`` choice on rows in filter order: every candidate's
-        validation RMSE (``_friction_search.py``), the ladder of widths of ``"auto"`` read
-        from each filter's velocity, that of the plays from the angle."""
-        target = np.asarray(y, dtype=float).reshape(len(values), -1)
-        positions = self._sources()
-        loads = load_inputs(values, positions, self.load_columns, self.powers)
-        recordings = layout.recordings(len(values))
-        if self.friction_angle_ is None:
-            radii, plays = (), [(None, ())]
-        else:
-            angle = values[:, positions[self.angle_column]]
-            if self.friction_angle_ == AUTO:
-                radii = angle_ladder(angle, recordings)
-                plays = basis_windows(radii)
-            else:
-                radii = self.friction_angle_
-                plays = [(radii, tuple(range(len(radii))))]
-        hysteresis = list(recording_hysteresis(angle, layout, radii).values()) if radii else []
-        velocity = None
-        if self.friction_velocity is not None:
-            velocity = values[:, positions[self.friction_column]]
-        searched = []
-        for time_constant in search_filters(self.velocity_filter_, self.sampling_period_):
-            if velocity is None:
-                widths, bands = (), [(None, ())]
-            else:
-                filtered = velocity
-                if time_constant is not None:
-                    filtered = filtered_velocity(
-                        velocity, layout, self.sampling_period_, time_constant
-                    )
-                if self.friction_velocity_ == AUTO:
-                    widths = velocity_ladder(filtered)
-                    bands = basis_windows(widths)
-                else:
-                    widths = friction_widths(self.friction_velocity_)
-                    bands = [(self.friction_velocity_, tuple(range(len(widths))))]
-            columns = list(friction_inputs(filtered, widths).values()) if widths else []
-            candidates = [
-                (
-                    {"friction_velocity": band, "friction_angle": play},
-                    (*band_columns, *(len(widths) + i for i in play_columns)),
-                )
-                for band, band_columns in bands
-                for play, play_columns in plays
-            ]
-            searched.append((time_constant, [*columns, *hysteresis], candidates))
-        return friction_search(
-            np.column_stack([values, *loads.values()]),
-            target,
-            layout.recordings(len(values)),
-            searched,
-            self._settings(),
-        )
 
     def _settings(self):
         """The settings searched, as the errors name them."""
@@ -373,9 +308,9 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         if len(set(self.load_columns)) != len(self.load_columns):
             raise ValueError(f"load_columns={self.load_columns!r} repeats a column.")
         if isinstance(self.friction_velocity, tuple | list):
-            _check_widths(self.friction_velocity, "friction_velocity", friction_names)
+            check_widths(self.friction_velocity, "friction_velocity", friction_names)
         if isinstance(self.friction_angle, tuple | list):
-            _check_widths(self.friction_angle, "friction_angle", hysteresis_names)
+            check_widths(self.friction_angle, "friction_angle", hysteresis_names)
 
     def _check_inputs(self):
         """The fitted inputs hold the source columns and none of the derived ones."""
@@ -652,26 +587,3 @@ def _as_radii(radii):
     if radii is None or isinstance(radii, str):
         return radii
     return (float(radii),)
-
-
-def _check_widths(widths, parameter, names_of):
-    """Refuse a basis (of ``parameter``, whose inputs ``names_of`` names) that is empty, holds
-    a width that is not a positive finite number, or two widths of one name."""
-    if not widths:
-        raise ValueError(f"{parameter}={widths!r} holds no width; give None for no such input.")
-    for width in widths:
-        if (
-            isinstance(width, bool)
-            or not isinstance(width, numbers.Real)
-            or not math.isfinite(width)
-            or width <= 0
-        ):
-            raise ValueError(
-                f"{parameter} must hold widths > 0; got {width!r} in {parameter}={widths!r}."
-            )
-    names = names_of(tuple(widths))
-    if len(set(names)) != len(names):
-        raise ValueError(
-            f"{parameter}={widths!r} repeats a width (to three significant digits, which "
-            f"name the inputs: {names})."
-        )

@@ -15,12 +15,15 @@ import shutil
 import time
 import warnings
 import zipfile
+from collections.abc import Iterable, Mapping
 from contextlib import contextmanager
+from numbers import Integral, Real
 from pathlib import Path
 
 from tqdm.auto import tqdm
 
-from .._base import get_data_home
+from ..._core._compat import FiniteInterval, Interval, StrOptions, validate_params
+from .._base import DATA_HOME, get_data_home
 from .._download import (
     atomic_open,
     check_zip,
@@ -39,6 +42,7 @@ from .._remote import (
     remote_zip,
 )
 from ._segment import (
+    FRAME_CONSTRAINTS,
     ROUTE_PATTERN,
     DamagedSegmentError,
     check_options,
@@ -48,6 +52,14 @@ from ._segment import (
 COMMA2K19_URL = "https://huggingface.co/datasets/commaai/comma2k19/resolve/main/"
 N_CHUNKS = 10
 METHODS = ("range", "archive")
+#: What the fetcher and the scan take of a remote source: the chunks (their numbers checked
+#: by :func:`check_chunks`), the folder URL, the timeout of a read, the progress bars.
+REMOTE_CONSTRAINTS = {
+    "chunks": [Interval(Integral, 1, N_CHUNKS, closed="both"), "array-like"],
+    "base_url": [str],
+    "timeout": [FiniteInterval(Real, 0, None, closed="neither")],
+    "progress": ["boolean"],
+}
 # Folders of a segment that range reads fetch: the loader's inputs, not the video.
 RANGE_FOLDERS = ("processed_log", "global_pose")
 # Segments whose members are fetched at once (concurrent requests).
@@ -266,6 +278,19 @@ class _Chunks:
             f.write("".join(f"{segment_name(k)}\n" for k in keys))
 
 
+@validate_params(
+    {
+        "segments": [str, Iterable, None],
+        "data_home": DATA_HOME,
+        "download_if_missing": ["boolean"],
+        "method": [StrOptions(set(METHODS))],
+        "checksums": [Mapping, None],
+        "keep_archive": ["boolean"],
+    }
+    | REMOTE_CONSTRAINTS
+    | FRAME_CONSTRAINTS,
+    prefer_skip_nested_validation=True,
+)
 def fetch_comma2k19(
     *,
     segments=None,
@@ -401,8 +426,6 @@ def fetch_comma2k19(
     """
     check_options(sampling_rate, engagement=engagement, steering=steering, min_span=min_span)
     chunk_numbers = check_chunks(chunks)
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}.")
     check_url(file_url(base_url, "Chunk_1.zip"))
     options = {
         "checksums": None if checksums is None else dict(checksums),

@@ -15,7 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ._segment import SegmentFiles, check_options, segment_frame, with_loader_options
+from ..._core._compat import validate_params
+from ._segment import (
+    LOADER_CONSTRAINTS,
+    SegmentFiles,
+    check_options,
+    segment_frame,
+    with_loader_options,
+)
 
 SAMPLE_ROUTE = "b0c9d2329ad1606b|2018-08-02--08-34-47"
 SAMPLE_SEGMENT = 40
@@ -76,6 +83,7 @@ def _open_sample():
     return np.load(io.BytesIO(data), allow_pickle=False)
 
 
+@validate_params(LOADER_CONSTRAINTS, prefer_skip_nested_validation=True)
 @with_loader_options
 def load_comma2k19_sample(
     *,

@@ -14,17 +14,19 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..._core._compat import validate_params
 from .._download import file_url
 from .._remote import check_url, remote_zip, require
 from ._fetch import (
     COMMA2K19_URL,
+    REMOTE_CONSTRAINTS,
     check_chunks,
     segment_folder,
     segment_members,
     segment_name,
     unpack_segments,
 )
-from ._segment import check_options, load_comma2k19_segment
+from ._segment import FRAME_CONSTRAINTS, check_options, load_comma2k19_segment
 
 # The CAN folders the loader reads: raw frames (steering, engagement) and the wheel speed.
 SCAN_FOLDERS = (("processed_log", "CAN", "raw_can"), ("processed_log", "CAN", "speed"))
@@ -44,6 +46,10 @@ COLUMNS = {
 }
 
 
+@validate_params(
+    REMOTE_CONSTRAINTS | {"sampling_rate": FRAME_CONSTRAINTS["sampling_rate"]},
+    prefer_skip_nested_validation=True,
+)
 def scan_comma2k19(
     chunks=(1, 2), *, base_url=COMMA2K19_URL, sampling_rate=20.0, timeout=60.0, progress=True
 ):

@@ -9,14 +9,16 @@ grid and can keep the spans the driver steers alone, each as a recording of its 
 """
 
 import math
-import numbers
+import os
 import re
 import textwrap
+from numbers import Real
 from pathlib import Path
 
 import numpy as np
 from scipy.signal import savgol_filter
 
+from ..._core._compat import FiniteInterval, StrOptions, validate_params
 from ..._core._schema import DRIVER, RECORDING, TARGET, TIME
 from .._frame import check_rate, tidy_frame
 from ._can import can_decoder
@@ -66,7 +68,8 @@ def _segment_name(path):
 
 
 def check_sampling_rate(sampling_rate):
-    """Return ``sampling_rate`` as a float, refusing what is not a rate in (0, 1000] Hz."""
+    """Return ``sampling_rate`` (a positive finite number) as a float, refusing a rate above
+    1000 Hz."""
     return check_rate(
         sampling_rate,
         why="the CAN messages of comma2k19 come at 50 to 83 Hz, so a faster grid only "
@@ -176,26 +179,28 @@ def _read_frames(segment, decoder, messages):
 
 
 def check_options(sampling_rate, *, engagement=False, steering="all", min_span=2.0):
-    """Check the options of :func:`load_comma2k19_segment` before any file is read; return the
-    sampling rate and the minimum span as floats.
+    """Check the options of :func:`load_comma2k19_segment` before any file is read, beyond
+    their :data:`LOADER_CONSTRAINTS` (the sampling rate's bound for this source, the extra
+    they need); return the sampling rate and the minimum span as floats.
 
     Raises ImportError when they need openpilot's DBC and ``skhmmgmr[can]`` is not installed.
     """
     sampling_rate = check_sampling_rate(sampling_rate)
-    if not isinstance(steering, str) or steering not in STEERING:
-        raise ValueError(f"steering must be one of {STEERING}, got {steering!r}.")
-    if (
-        not isinstance(min_span, numbers.Real)
-        or isinstance(min_span, (bool, np.bool_))
-        or not 0 <= min_span < np.inf
-    ):
-        raise ValueError(f"min_span must be a number of seconds >= 0, got {min_span!r}.")
     can_decoder(need_dbc=bool(engagement) or steering == "driver")
     return sampling_rate, float(min_span)
 
 
-# The options of both comma2k19 loaders (the folder's and the bundled sample's), written once
-# and put in each docstring in place of its line "{loader options}".
+# The options of both comma2k19 loaders (the folder's and the bundled sample's), written once:
+# their constraints (for the loaders' validate_params; the fetcher's, but for the recording
+# id), and their description, put in each docstring in place of its line "{loader options}".
+FRAME_CONSTRAINTS = {
+    "sampling_rate": [FiniteInterval(Real, 0, None, closed="neither")],
+    "eps_torque": ["boolean"],
+    "engagement": ["boolean"],
+    "steering": [StrOptions(set(STEERING))],
+    "min_span": [FiniteInterval(Real, 0, None, closed="left")],
+}
+LOADER_CONSTRAINTS = FRAME_CONSTRAINTS | {"recording": [str, None]}
 LOADER_OPTIONS_DOC = """\
 sampling_rate : float, default=20.0
     Rate of the output time grid, in Hz, at most 1000. The CAN messages come at about 50 Hz
@@ -236,6 +241,9 @@ def with_loader_options(func):
     return func
 
 
+@validate_params(
+    {"path": [str, os.PathLike]} | LOADER_CONSTRAINTS, prefer_skip_nested_validation=True
+)
 @with_loader_options
 def load_comma2k19_segment(
     path,

@@ -2,11 +2,14 @@
 
 import os
 import warnings
+from collections.abc import Mapping
+from numbers import Real
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from ..._core._compat import FiniteInterval, validate_params
 from ..._core._schema import (
     CROSSING_TIME,
     DRIVER,
@@ -18,7 +21,7 @@ from ..._core._schema import (
     TIME,
 )
 from .._frame import META_DEFAULTS, check_rate, tidy_frame, time_order
-from ._resample import check_max_gap, resample_recordings
+from ._resample import RESAMPLING_CONSTRAINTS, check_max_gap, resample_recordings
 
 _CSV_SUFFIXES = (".csv", ".csv.gz", ".csv.bz2", ".csv.zip", ".csv.xz")
 _PARQUET_SUFFIXES = (".parquet", ".pq")
@@ -194,6 +197,21 @@ def _select(description, frame, stem, *, recording, time, target, features):
     return pd.DataFrame(out), list(features)
 
 
+@validate_params(
+    {
+        "data": [pd.DataFrame, str, os.PathLike, "array-like"],
+        "recording": [str],
+        "time": [str],
+        "target": [str],
+        "features": [str, "array-like", None],
+        "sampling_rate": [FiniteInterval(Real, 0, None, closed="neither"), None],
+        "max_gap": [*RESAMPLING_CONSTRAINTS["max_gap"], None],
+        "min_length": RESAMPLING_CONSTRAINTS["min_length"],
+        "allow_missing": ["boolean"],
+        "units": [Mapping, None],
+    },
+    prefer_skip_nested_validation=True,
+)
 def load_recordings(
     data,
     *,
@@ -299,7 +317,7 @@ def load_recordings(
     >>> list(df.columns)
     ['recording', 'driver', 'setting', 'split', 'time', 'steering_wheel_angle', 'driver_torque']
     """
-    check_rate(sampling_rate, optional=True)
+    check_rate(sampling_rate)
     if max_gap is not None:
         if sampling_rate is None:
             raise ValueError("max_gap needs sampling_rate, the rate of the grid to resample to.")

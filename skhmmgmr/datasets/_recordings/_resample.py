@@ -24,10 +24,12 @@ by indexing with these arrays.
 
 import copy
 import warnings
+from numbers import Integral, Real
 
 import numpy as np
 import pandas as pd
 
+from ..._core._compat import FiniteInterval, Interval, validate_params
 from ..._core._schema import CROSSING_TIME, DRIVER, MANOEUVRE, RECORDING, SETTING, SPLIT, TIME
 from .._frame import check_rate, check_times
 
@@ -41,13 +43,22 @@ MAX_GRID_ROWS = 1_000_000_000
 _LABELS = (DRIVER, SETTING, SPLIT, MANOEUVRE, CROSSING_TIME)
 
 
+#: The resampling's options that :func:`load_recordings` passes on (the bounds of ``max_gap``
+#: depend on the sampling rate: :func:`check_max_gap`).
+RESAMPLING_CONSTRAINTS = {
+    "max_gap": [Interval(Real, None, None, closed="both")],  # inf: no gap splits
+    "min_length": [Interval(Integral, 1, None, closed="left")],
+}
+
+
 def check_max_gap(max_gap, sampling_rate):
-    """Refuse a ``max_gap`` that is not a number of seconds of at least one sampling period.
+    """Refuse a ``max_gap`` shorter than one sampling period.
 
     Parameters
     ----------
     max_gap : float
-        The longest step between samples that is interpolated [s]; ``inf`` is accepted.
+        The longest step between samples that is interpolated [s], a number
+        (:data:`RESAMPLING_CONSTRAINTS`); ``inf`` is accepted.
     sampling_rate : float
         The rate of the grid [Hz], already checked.
 
@@ -60,8 +71,6 @@ def check_max_gap(max_gap, sampling_rate):
     ValueError
         Naming the value given and the period.
     """
-    if isinstance(max_gap, bool) or not isinstance(max_gap, (int, float, np.number)):
-        raise ValueError(f"max_gap must be a number of seconds, got {max_gap!r}.")
     period = 1.0 / sampling_rate
     if not max_gap >= period * (1 - 1e-9):  # also refuses NaN
         raise ValueError(
@@ -71,6 +80,17 @@ def check_max_gap(max_gap, sampling_rate):
     return float(max_gap)
 
 
+@validate_params(
+    {
+        "frame": [pd.DataFrame],
+        "sampling_rate": [FiniteInterval(Real, 0, None, closed="neither")],
+        "recording": [str],
+        "time": [str],
+        "hold": [str, "array-like"],
+    }
+    | RESAMPLING_CONSTRAINTS,
+    prefer_skip_nested_validation=True,
+)
 def resample_recordings(
     frame,
     sampling_rate,
@@ -175,14 +195,8 @@ def resample_recordings(
     5  drive7/1   1.5   11.5     4
     6  drive7/1   1.6   11.6     4
     """
-    if not isinstance(frame, pd.DataFrame):
-        raise TypeError(f"frame must be a pandas DataFrame, got {type(frame).__name__}.")
     check_rate(sampling_rate)
     max_gap = check_max_gap(max_gap, sampling_rate)
-    if isinstance(min_length, bool) or not isinstance(min_length, (int, np.integer)):
-        raise ValueError(f"min_length must be a whole number of samples, got {min_length!r}.")
-    if min_length < 1:
-        raise ValueError(f"min_length must be at least 1, got {min_length}.")
     hold = [hold] if isinstance(hold, str) else list(hold)
     columns = list(frame.columns)
     missing = [c for c in dict.fromkeys([recording, time, *hold]) if c not in columns]

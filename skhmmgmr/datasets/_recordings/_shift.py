@@ -1,11 +1,22 @@
 """Targets shifted ahead within every recording, for models that estimate the future."""
 
+from numbers import Integral
+
 import numpy as np
 import pandas as pd
 
+from ..._core._compat import Interval, validate_params
 from ..._core._panel import read_layout
 
 
+@validate_params(
+    {
+        "y": ["array-like"],
+        "horizon_rows": [Interval(Integral, 0, None, closed="left")],
+        "groups": ["array-like", None],
+    },
+    prefer_skip_nested_validation=True,
+)
 def shift_target(y, horizon_rows, groups=None):
     """The target ``horizon_rows`` rows ahead, within every recording.
 
@@ -37,8 +48,6 @@ def shift_target(y, horizon_rows, groups=None):
     >>> shift_target(np.arange(6.0), 2, groups=["a", "a", "a", "b", "b", "b"])
     array([ 2., nan, nan,  5., nan, nan])
     """
-    if int(horizon_rows) != horizon_rows or horizon_rows < 0:
-        raise ValueError(f"horizon_rows must be an integer >= 0, got {horizon_rows!r}")
     horizon_rows = int(horizon_rows)
     values = np.asarray(y, dtype=float)
     if values.ndim not in (1, 2):

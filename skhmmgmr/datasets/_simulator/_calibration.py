@@ -3,6 +3,7 @@
 import numpy as np
 import pandas as pd
 
+from ..._core._compat import StrOptions, validate_params
 from ..._core._schema import DRIVER, RECORDING, SETTING, TARGET
 
 # Bands (around Table C.2 of the thesis) that a 5-minute setting-7 highway section meets for
@@ -60,6 +61,10 @@ THESIS_TABLE_C2 = pd.DataFrame(
 )
 
 
+@validate_params(
+    {"frame": [pd.DataFrame], "by": [StrOptions({RECORDING, DRIVER})]},
+    prefer_skip_nested_validation=True,
+)
 def calibration_table(frame, by="recording"):
     """Driver statistics of Table C.2 (RMS and max of torque, deviation, angle...).
 
@@ -84,8 +89,6 @@ def calibration_table(frame, by="recording"):
     >>> list(table.columns[:2])
     ['driver', 'setting']
     """
-    if by not in (RECORDING, DRIVER):
-        raise ValueError(f"by must be 'recording' or 'driver', got by={by!r}.")
 
     def rms(x):
         return float(np.sqrt(np.mean(np.square(x))))

@@ -5,6 +5,7 @@ import warnings
 
 import numpy as np
 
+from ..._core._compat import validate_params
 from ..._core._schema import FEATURE_NAMES
 from ._closed_loop import LOST_CONTROL
 from ._driver import DRIVER_STYLES
@@ -19,6 +20,16 @@ from ._sensors import SensorStream, draw_errors
 _UNUSED_HUMAN = "defensive"
 
 
+@validate_params(
+    {
+        # a style, a fitted model, an FMU or a callable: refused below, naming what it takes
+        "driver": "no_validation",
+        "recording": [str, None],
+        "split": [str],
+    }
+    | SectionSpec.constraints(),
+    prefer_skip_nested_validation=False,
+)
 def drive(
     driver,
     *,

@@ -24,10 +24,10 @@ from numbers import Integral
 import numpy as np
 import pandas as pd
 
-from ..._core._compat import Interval, validate_params
+from ..._core._compat import HasMethods, Interval, StrOptions, validate_params
 from ..._core._schema import FEATURE_NAMES, RECORDING, TARGET, TIME
 from ._closed_loop import INITIAL_COLUMNS, LOG_COLUMNS, simulate
-from ._driver import check_driver
+from ._driver import DRIVER_STYLES, DriverParameters, check_driver
 from ._model_driver import as_torque, model_stream
 from ._section import Section, SectionSpec
 from ._sensors import SensorStream, draw_errors, measure
@@ -40,7 +40,15 @@ _STATE_COLUMNS = [LOG_COLUMNS.index(name) for name in INITIAL_COLUMNS]
 
 
 @validate_params(
-    {"start_every": [Interval(Integral, 1, None, closed="left")], "return_proba": ["boolean"]},
+    {
+        "model": [HasMethods(["filter_stream"])],
+        "horizons": ["array-like"],
+        "driver": [StrOptions(set(DRIVER_STYLES)), DriverParameters],
+        "start_every": [Interval(Integral, 1, None, closed="left")],
+        "return_proba": ["boolean"],
+        "recording": [str, None],
+    }
+    | SectionSpec.constraints(),
     prefer_skip_nested_validation=False,
 )
 def torque_ahead(
@@ -140,11 +148,6 @@ def torque_ahead(
     """
     spec = SectionSpec.of(locals(), "torque_ahead")
     parameters = check_driver(driver)
-    if not hasattr(model, "filter_stream"):
-        raise TypeError(
-            "model must be a fitted model of the package with filter_stream() (an "
-            f"HMMGMRRegressor or a torque pipeline); got {type(model).__name__}."
-        )
     stream, positions = model_stream(model, spec.sampling_rate)
     who, rate = f"The model {type(model).__name__}", spec.sampling_rate
     n_samples = spec.n_samples

@@ -3,9 +3,13 @@ measures what happened (:func:`make_lane_keeping`)."""
 
 import os
 
-from ._driver import check_driver
+from ..._core._compat import HasMethods, StrOptions, validate_params
+from ._driver import DRIVER_STYLES, DriverParameters
 from ._section import Section, SectionSpec
 from ._sensors import measure
+
+#: What ``cache`` may be: a folder, a ``joblib.Memory`` (or anything with its ``cache``), None.
+CACHE = [str, os.PathLike, HasMethods(["cache"]), None]
 
 
 def human_run(spec, driver, recording=None, split="train"):
@@ -24,6 +28,16 @@ def human_run(spec, driver, recording=None, split="train"):
     return section.frame(log, features, torque, recording=recording, driver=style, split=split)
 
 
+@validate_params(
+    {
+        "driver": [StrOptions(set(DRIVER_STYLES)), DriverParameters],
+        "recording": [str, None],
+        "split": [str],
+        "cache": CACHE,
+    }
+    | SectionSpec.constraints(),
+    prefer_skip_nested_validation=True,
+)
 def make_lane_keeping(
     duration=300.0,
     *,
@@ -169,7 +183,6 @@ default="highway"
     'Nm'
     """
     spec = SectionSpec.of(locals(), "make_lane_keeping")
-    check_driver(driver)
     run = cached(cache) if cache is not None and spec.seeded else human_run
     return run(spec, driver, recording, split)
 
@@ -180,6 +193,4 @@ def cached(cache):
 
     if isinstance(cache, (str, os.PathLike)):
         cache = Memory(os.fspath(cache), verbose=0)
-    if not hasattr(cache, "cache"):
-        raise ValueError(f"cache must be a directory or a joblib.Memory, got cache={cache!r}.")
     return cache.cache(human_run)

@@ -10,7 +10,7 @@ from sklearn.utils import check_random_state
 from ..._core._compat import Interval, validate_params
 from .._frame import concat_frames
 from ._driver import DRIVER_STYLES
-from ._lane_keeping import cached, human_run
+from ._lane_keeping import CACHE, cached, human_run
 from ._section import SectionSpec
 
 TRAIN_SETTINGS = (1, 2, 3, 4, 5, 6)
@@ -30,11 +30,17 @@ def _sections(n_train_per_setting, n_validation, n_test):
 
 @validate_params(
     {
+        "drivers": [str, "array-like"],
         "n_train_per_setting": _COUNT,
         "n_validation": _COUNT,
         "n_test": _COUNT,
+        "random_state": ["random_state"],
         "n_jobs": [Integral, None],
-    },
+        "cache": CACHE,
+    }
+    | SectionSpec.constraints(
+        "duration", "sampling_rate", "speed_kmh", "scenario", "sensor_noise", "vehicle"
+    ),
     prefer_skip_nested_validation=False,
 )
 def make_driving_protocol(

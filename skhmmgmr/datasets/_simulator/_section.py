@@ -84,7 +84,7 @@ class SectionSpec:
 
     def __post_init__(self, caller):
         validate_parameter_constraints(
-            {f.name: f.metadata["constraints"] for f in fields(self)},
+            self.constraints(),
             {f.name: getattr(self, f.name) for f in fields(self)},
             caller_name=caller,
         )
@@ -94,6 +94,14 @@ class SectionSpec:
         object.__setattr__(self, "sensor_noise", check_sensor_noise(self.sensor_noise))
         object.__setattr__(self, "vehicle", check_vehicle(self.vehicle))
         self._check_size()
+
+    @classmethod
+    def constraints(cls, *names):
+        """scikit-learn's constraints of the fields (those of ``names``, or all), for the
+        ``validate_params`` of a public function that takes them."""
+        return {
+            f.name: f.metadata["constraints"] for f in fields(cls) if f.name in names or not names
+        }
 
     @classmethod
     def of(cls, arguments, caller, **given):

@@ -54,6 +54,8 @@ from dataclasses import asdict, dataclass, fields, replace
 
 from sklearn.utils import check_random_state
 
+from ..._core._compat import validate_params
+
 GRAVITY = 9.81
 
 
@@ -250,6 +252,7 @@ VEHICLE_RANGES = {
 LOG_UNIFORM = frozenset({"friction_velocity"})
 
 
+@validate_params({"random_state": ["random_state"]}, prefer_skip_nested_validation=True)
 def draw_vehicle(random_state=None):
     """Draw a car's steering system and sensors within :data:`VEHICLE_RANGES`.
 
