@@ -241,13 +241,13 @@ def _held_out_squares(trained, held_out, inputs, outputs):
     return float(np.trace(squares - 2.0 * coef.T @ targets + coef.T @ products @ coef))
 
 
-def candidate_table(step, layout, values, y):
+def candidate_table(step, layout, values, y, positions, settings):
     """The table of the ``"auto"`` choice of ``step`` (a ``SteeringFeatures`` in its ``fit``)
     on rows in filter order: every candidate's validation RMSE (:func:`friction_search`), the
     ladder of widths of ``"auto"`` read from each filter's velocity, that of the plays from
-    the angle."""
+    the angle. ``positions``: the source columns' positions in ``values``; ``settings``: the
+    settings searched, as the errors name them."""
     target = np.asarray(y, dtype=float).reshape(len(values), -1)
-    positions = step._sources()
     loads = load_inputs(values, positions, step.load_columns, step.powers)
     recordings = layout.recordings(len(values))
     if step.friction_angle_ is None:
@@ -293,5 +293,5 @@ def candidate_table(step, layout, values, y):
         target,
         layout.recordings(len(values)),
         searched,
-        step._settings(),
+        settings,
     )

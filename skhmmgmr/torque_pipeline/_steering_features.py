@@ -277,7 +277,9 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
                 )
         if AUTO not in (self.friction_velocity_, self.velocity_filter_, self.friction_angle_):
             return
-        self.friction_search_ = candidate_table(self, layout, values, y)
+        self.friction_search_ = candidate_table(
+            self, layout, values, y, self._sources(), self._settings()
+        )
         chosen = self.friction_search_[self.friction_search_["chosen"]].iloc[0]
         self.friction_velocity_ = _as_setting(chosen["friction_velocity"])
         self.friction_angle_ = _as_radii(chosen["friction_angle"])
