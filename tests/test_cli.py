@@ -13,10 +13,6 @@ from skhmmgmr.cli import build_parser, main
 
 pytest.importorskip("matplotlib")
 
-TINY = ["--duration", "6", "--sampling-rate", "10", "--n-top", "2", "--k-max", "2"]
-TINY += ["--trade-off-step", "50", "--n-jobs", "1", "--quiet"]
-FEATURES = ["steering_wheel_angle", "yaw_rate", "lateral_acceleration"]
-
 
 def make_recordings(n_recordings=6, length=80, seed=0, split=True):
     """A tidy CSV-like table: the torque follows f0 and f1."""
@@ -34,17 +30,11 @@ def make_recordings(n_recordings=6, length=80, seed=0, split=True):
     return pd.concat(frames, ignore_index=True)
 
 
-@pytest.fixture(scope="module")
-def demo_dir(tmp_path_factory):
-    output = tmp_path_factory.mktemp("demo") / "report"
-    argv = ["demo", "--drivers", "defensive", "novice", "--features", *FEATURES]
-    assert main([*argv, *TINY, "--output", str(output)]) == 0
-    return output
-
-
 def test_demo_writes_report(demo_dir, capsys):
     names = {p.name for p in demo_dir.iterdir()}
-    for figure in ("estimate", "relevance", "state_selection", "drivers"):
+    figures = ("estimate", "models_estimate", "state_selection", "trade_off", "closed_loop")
+    figures += ("drivers", "relevance")
+    for figure in figures:
         assert f"{figure}.png" in names
         assert (demo_dir / f"{figure}.png").stat().st_size > 5_000
     for table in ("test_summary", "per_driver", "candidates", "relevance", "states", "bic"):
@@ -55,7 +45,7 @@ def test_demo_writes_report(demo_dir, capsys):
     assert manifest["details"]["seed"] == 0
     assert "simulation" in manifest["timings"]
     page = (demo_dir / "index.html").read_text()
-    assert page.count("data:image/png;base64,") == 4
+    assert page.count("data:image/png;base64,") == len(figures)
     assert page.count("<table") >= 8
     assert "Test set per driver" in page and "defensive" in page and "novice" in page
     per_driver = pd.read_csv(demo_dir / "per_driver.csv")
@@ -77,6 +67,10 @@ def test_report_rerenders_from_saved_tables(demo_dir, tmp_path):
 def test_report_errors(tmp_path, capsys):
     assert main(["report", str(tmp_path)]) == 2
     assert "manifest.json" in capsys.readouterr().err
+    recordings = tmp_path / "runs.csv"
+    make_recordings().to_csv(recordings, index=False)
+    assert main(["report", str(recordings)]) == 2
+    assert f"skhmmgmr select {recordings}" in capsys.readouterr().err
 
 
 def test_select_on_csv_without_split(tmp_path, capsys):
@@ -96,6 +90,16 @@ def test_select_on_csv_without_split(tmp_path, capsys):
         or sum(map(int, manifest["details"]["recordings (train/validation/test)"].split("/"))) == 6
     )
     assert (output / "index.html").is_file()
+    # the same page as the demo's: the parts whose columns the recordings lack are named
+    models = pd.read_csv(output / "models.csv")
+    assert list(models["model"]) == ["selected_model", "baseline", "gradient_boosting"]
+    torque_pipeline, driver_model = manifest["notes"][:2]
+    assert "torque pipeline is left out" in torque_pipeline and "steering_wheel_velocity" in (
+        torque_pipeline
+    )
+    assert "driver model is left out" in driver_model and "lateral_deviation_0m" in driver_model
+    assert (output / "selected_model.json").is_file()
+    assert "What to use for what?" in (output / "index.html").read_text()
 
 
 def test_select_errors(tmp_path, capsys):
@@ -363,3 +367,29 @@ def test_predict_never_replaces_the_users_columns(tmp_path, capsys):
     result = pd.read_csv(tmp_path / "runs_predicted.csv")
     assert (result["estimate"] == 7.0).all()
     assert {"hmm_estimate", "hmm_estimate_std", "hmm_state_0", "hmm_state_1"} <= set(result)
+
+
+def test_every_stage_has_one_line_and_the_loops_inside_count_into_it():
+    import io
+
+    from skhmmgmr._core._progress import progress_bar
+    from skhmmgmr.cli._stages import Stages
+
+    stream = io.StringIO()  # not a terminal: one line per stage, when it ends
+    stages = Stages(stream=stream)
+    with stages.stage("parameter selection"):
+        assert list(progress_bar(range(3), total=3, desc="subsets")) == [0, 1, 2]
+        assert list(progress_bar("ab", total=2, desc="states")) == ["a", "b"]
+    with stages.stage("figures", total=1) as bar:
+        bar.update()
+    lines = stream.getvalue().splitlines()
+    assert [line.split(" (")[0] for line in lines] == [
+        "parameter selection: done, 5/5 steps",
+        "figures: done, 1/1 steps",
+    ]
+    assert set(stages.timings) == {"parameter selection", "figures"}
+    # outside a stage a loop keeps a bar of its own; --quiet shows nothing
+    quiet = io.StringIO()
+    with Stages(quiet=True, stream=quiet).stage("simulation", total=1) as bar:
+        bar.update()
+    assert quiet.getvalue() == ""

@@ -290,7 +290,7 @@ def test_interrupted_parallel_search_leaves_no_folder_or_worker(data, tmp_path, 
         for _ in results:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(_evaluation, "tqdm", interrupt)
+    monkeypatch.setattr(_evaluation, "progress_bar", interrupt)
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     selector = ExhaustiveFeatureSelector(cv=cv, max_features=2, sampling_period=PERIOD, n_jobs=2)
     with pytest.raises(KeyboardInterrupt):

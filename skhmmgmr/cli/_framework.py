@@ -7,7 +7,6 @@ renders again from its saved tables.
 """
 
 import inspect
-import time
 from pathlib import Path
 
 from ..datasets import RECORDING, SPLIT, TIME
@@ -26,8 +25,10 @@ from ._options import (
     finite_float,
     log,
     option_name,
-    progress,
 )
+from ._saved_models import save_models
+from ._showcase import models_table
+from ._stages import Stages
 
 
 def _framework_defaults():
@@ -59,47 +60,64 @@ def _per_driver(test, drivers):
     )
 
 
-def _run_framework(args, data, meta):
-    """select_parameters + figures + report folder; shared by ``demo`` and ``select``."""
+def _run_framework(args, data, meta, stages, human=None):
+    """select_parameters, the other models, figures and report folder; shared by ``demo``
+    and ``select``. ``human``: the simulator's driver style that drives the held-out road
+    beside the driver model (``demo`` only)."""
     from ..metrics import trade_offs
     from ..selection import select_parameters
-    from ._report import report_figures, report_tables, versions, write_report
+    from ._report import report_tables, versions, write_report
 
     try:
         relevance_trade_offs = trade_offs(args.trade_off_step)
     except ValueError as exc:
         raise CommandError(f"--trade-off-step: {exc}") from exc
     period = float(data.groupby(RECORDING)[TIME].diff().median())
-    started = time.perf_counter()
-    bar = progress(args, 3, "skhmmgmr")
-    bar.set_postfix_str("parameter selection")
-    try:
-        with scheduler_context(args):
-            report = select_parameters(
-                data,
-                candidate_features=args.features,
-                n_top=args.n_top,
-                k_max=args.k_max,
-                trade_off=args.trade_off,
-                relevance_trade_offs=relevance_trade_offs,
-                sampling_period=period,
-                n_jobs=args.n_jobs,
-                progress=not args.quiet,
-                random_state=args.seed,
-                screening_tol=args.screening_tol,
-            )
-    except ValueError as exc:
-        raise CommandError(str(exc)) from exc
-    bar.update()
-    bar.set_postfix_str("figures")
-    per_driver = _per_driver(report.test, dict(zip(data[RECORDING], data["driver"], strict=False)))
-    figures = report_figures(report, data, sampling_period=period)
-    bar.update()
-    bar.set_postfix_str("report")
-    timings = {**meta.pop("timings", {}), **report.timings}
-    timings["total"] = (
-        sum(timings.values()) + time.perf_counter() - started - sum(report.timings.values())
-    )
+    with stages.stage("parameter selection"):
+        try:
+            with scheduler_context(args):
+                report = select_parameters(
+                    data,
+                    candidate_features=args.features,
+                    n_top=args.n_top,
+                    k_max=args.k_max,
+                    trade_off=args.trade_off,
+                    relevance_trade_offs=relevance_trade_offs,
+                    sampling_period=period,
+                    n_jobs=args.n_jobs,
+                    progress=not args.quiet,
+                    random_state=args.seed,
+                    screening_tol=args.screening_tol,
+                )
+        except ValueError as exc:
+            raise CommandError(str(exc)) from exc
+    showcase = _other_models(args, report, data, period, stages, human)
+    with stages.stage("figures", total=1) as bar:
+        per_driver = _per_driver(
+            report.test, dict(zip(data[RECORDING], data["driver"], strict=False))
+        )
+        figures = _figures(report, data, showcase, period)
+        bar.update()
+    models = models_table(showcase)
+    tables = {
+        "models": models,
+        "lane_keeping": showcase.lane_keeping,
+        **report_tables(report, per_driver),
+        "models_test": showcase.test,
+    }
+    tables = {name: table for name, table in tables.items() if table is not None}
+    notes = list(showcase.notes.values())
+    saved = []
+
+    def save(folder):
+        saved[:] = save_models(
+            showcase.candidates.values(), folder, sampling_period=period, notes=notes
+        )
+        meta["answers"] = _answers(report, data, models, showcase, saved, notes)
+        return saved
+
+    # the page shows the stages before its own, which ends once the page is written
+    timings = {name: value["wall"] for name, value in stages.timings.items()}
     details = {
         **meta.pop("details", {}),
         "selected features": ", ".join(report.features),
@@ -112,27 +130,114 @@ def _run_framework(args, data, meta):
         "n_jobs": args.n_jobs,
         "scheduler": args.scheduler or "joblib on this machine",
         **{f"time: {k} [s]": f"{v:.1f}" for k, v in timings.items()},
+        **{f"time: framework, {k} [s]": f"{v:.1f}" for k, v in report.timings.items()},
     }
-    try:
-        page = write_report(
-            args.output,
-            tables=report_tables(report, per_driver),
-            figures=figures,
-            meta={**meta, "details": details, "timings": timings, "versions": versions()},
-            overwrite=args.overwrite,
-        )
-    except (ValueError, OSError) as exc:
-        raise CommandError(f"cannot write the report {args.output}: {exc}") from exc
-    bar.update()
-    bar.close()
-    columns = ["rmse", "accuracy", "smoothness", "performance_score", "n_features", "n_states"]
+    # the stages' wall and CPU seconds (this process only: not joblib's workers)
+    meta.update(details=details, timings=stages.timings, notes=notes, versions=versions())
+    with stages.stage("report and saved models", total=1) as bar:
+        try:
+            page = write_report(
+                args.output,
+                tables=tables,
+                figures=figures,
+                meta=meta,
+                files=save,
+                overwrite=args.overwrite,
+            )
+        except (ValueError, OSError) as exc:
+            raise CommandError(f"cannot write the report {args.output}: {exc}") from exc
+        bar.update()
+    total = sum(value["wall"] for value in stages.timings.values())
     print(f"selected features: {', '.join(report.features)}; K = {report.n_states}")
     if report.empty_candidates:
         print(f"empty candidate subsets (not compared): {', '.join(report.empty_candidates)}")
-    print(report.test_summary.set_index("model")[columns].round(3).to_string())
-    print(per_driver.set_index(["driver", "model"]).round(3).to_string())
-    log(args, f"Wrote {page} ({timings['total']:.1f} s)")
+    columns = ["label", "accuracy", "smoothness", "rmse"]
+    print(models.set_index("model")[columns].round(3).to_string())
+    for note in notes:
+        print(note)
+    log(args, f"Wrote {page} ({total:.1f} s)")
     return 0
+
+
+def _other_models(args, report, data, period, stages, human):
+    """The torque pipeline, gradient boosting and the driver model on the framework's split,
+    and with ``human`` the driver model at the wheel of a held-out road."""
+    from ._showcase import closed_loop, run_showcase
+
+    with stages.stage("other models"):
+        showcase = run_showcase(report, data, sampling_period=period, seed=args.seed)
+    if human is not None and "driver_model" in showcase.candidates:
+        with stages.stage("closed loop", total=1) as bar:
+            showcase.drives, showcase.lane_keeping = closed_loop(
+                showcase.candidates,
+                human,
+                sampling_rate=1.0 / period,
+                seed=args.seed,
+            )
+            bar.update()
+    return showcase
+
+
+def _figures(report, data, showcase, period):
+    """The framework's figures and the showcase's, in the page's order."""
+    from ._report import report_figures
+
+    figures = report_figures(report, data, sampling_period=period)
+    if not figures:
+        return figures
+    from ._showcase_figures import (
+        closed_loop_figure,
+        models_estimate_figure,
+        state_selection_figure,
+        trade_off_figure,
+    )
+
+    models = models_table(showcase)
+    figures["models_estimate"] = models_estimate_figure(showcase.first, models)
+    figures["state_selection"] = state_selection_figure(report)
+    figures["trade_off"] = trade_off_figure(report.candidates, models)
+    if showcase.drives:
+        figures["closed_loop"] = closed_loop_figure(showcase.drives, showcase.lane_keeping)
+    order = ["estimate", "models_estimate", "state_selection", "trade_off", "closed_loop"]
+    order += ["drivers", "relevance"]
+    return {name: figures[name] for name in order if name in figures}
+
+
+def _answers(report, data, models, showcase, saved, notes):
+    """The page's first section, from the tables the report saves."""
+    from . import _answers as answers
+    from ._showcase import CLOSED_LOOP_ROAD
+
+    n_validation = data.loc[data[SPLIT] == "validation", RECORDING].nunique()
+    found = [
+        (
+            "What was selected, and why?",
+            answers.selected_answer(
+                models,
+                report.state_choices,
+                trade_off=report.trade_off,
+                features=list(report.features),
+                n_states=report.n_states,
+                n_validation=n_validation,
+            ),
+        ),
+        (
+            "What does it gain and cost against the baseline?",
+            answers.trade_off_answer(models, trade_off=report.trade_off),
+        ),
+        ("What to use for what?", answers.uses_answer(models)),
+    ]
+    if showcase.lane_keeping is not None:
+        road = (
+            f"setting {CLOSED_LOOP_ROAD['setting']}, {CLOSED_LOOP_ROAD['duration']:.0f} s at "
+            "100 km/h"
+        )
+        found.append(
+            ("Can the driver model drive?", answers.drive_answer(showcase.lane_keeping, road=road))
+        )
+    if saved:
+        found.append(("How do I use a model outside Python?", answers.files_answer(saved)))
+    return [{"question": q, "answer": a} for q, a in found]
 
 
 def command_demo(args):
@@ -149,20 +254,19 @@ def command_demo(args):
         f"Simulating drivers {', '.join(args.drivers)}: 12 training, 6 validation and 6 test "
         f"sections of {args.duration:.0f} s at {args.sampling_rate:g} Hz each",
     )
-    started = time.perf_counter()
-    bar = progress(args, 1, "simulation")
-    try:
-        data = make_driving_protocol(
-            drivers=tuple(args.drivers),
-            duration=args.duration,
-            sampling_rate=args.sampling_rate,
-            random_state=args.seed,
-            n_jobs=args.n_jobs,
-        )
-    except ValueError as exc:
-        raise CommandError(str(exc)) from exc
-    bar.update()
-    bar.close()
+    stages = Stages(quiet=args.quiet)
+    with stages.stage("simulation", total=1) as bar:
+        try:
+            data = make_driving_protocol(
+                drivers=tuple(args.drivers),
+                duration=args.duration,
+                sampling_rate=args.sampling_rate,
+                random_state=args.seed,
+                n_jobs=args.n_jobs,
+            )
+        except ValueError as exc:
+            raise CommandError(str(exc)) from exc
+        bar.update()
     text = [
         "skhmmgmr demo: the thesis' driving protocol simulated for the virtual drivers "
         f"{', '.join(args.drivers)} (12 training sections on settings 1-6, 6 validation and 6 "
@@ -185,9 +289,8 @@ def command_demo(args):
         "command": "demo",
         "text": text,
         "details": details,
-        "timings": {"simulation": time.perf_counter() - started},
     }
-    return _run_framework(args, data, meta)
+    return _run_framework(args, data, meta, stages, human=args.drivers[0])
 
 
 def command_select(args):
@@ -251,12 +354,18 @@ def command_select(args):
             "split": rule,
         },
     }
-    return _run_framework(args, data, meta)
+    return _run_framework(args, data, meta, Stages(quiet=args.quiet))
 
 
 def command_report(args):
     from ._report import render_html
 
+    if Path(args.result_dir).is_file():
+        raise CommandError(
+            f"{args.result_dir} is a file: 'report' re-renders a report folder; to write the "
+            f"report of recordings, run 'skhmmgmr select {args.result_dir}' (with --target, "
+            "--recording and --time naming its columns)"
+        )
     try:
         page = render_html(args.result_dir)
     except (ValueError, OSError) as exc:

@@ -32,12 +32,6 @@ def log(args, message):
         print(message, flush=True)
 
 
-def progress(args, total, desc):
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=desc, disable=getattr(args, "quiet", False), leave=False)
-
-
 def option_name(name):
     """The option of a parameter: ``velocity_filter`` -> ``--velocity-filter``."""
     return f"--{name.replace('_', '-')}"

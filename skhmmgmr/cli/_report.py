@@ -30,9 +30,22 @@ MAX_ROWS = 25
 # keys of every entry of the manifest's lists
 TABLE_FIELDS = ("name", "file", "caption", "shown")
 FIGURE_FIELDS = ("name", "file", "caption")
+#: keys of every saved model file (portable JSON, C source and header, FMU)
+FILE_FIELDS = ("name", "file", "caption")
+#: the manifest's lists of files, with the keys of their entries; "files" is optional
+#: (a report of skhmmgmr <= 0.2 saved no model)
+LISTS = {"tables": TABLE_FIELDS, "figures": FIGURE_FIELDS, "files": FILE_FIELDS}
 
 # name -> (caption, shown on the page); every table is saved, long ones are shown truncated
 TABLES = {
+    "models": (
+        "What to use for what: every model on the same test recordings (means over them)",
+        True,
+    ),
+    "lane_keeping": (
+        "The driver model at the wheel of a held-out road, beside the human (closed loop)",
+        True,
+    ),
     "test_summary": ("Test set: final model against the all-feature baseline (means)", True),
     "per_driver": ("Test set per driver (means over the driver's test recordings)", True),
     "candidates": (
@@ -47,6 +60,7 @@ TABLES = {
     "bic": ("BIC of every K on the training recordings", True),
     "states": ("State selection: every K on every validation recording", False),
     "test": ("Test set: every recording", True),
+    "models_test": ("Every model on every test recording", False),
     "candidate_scores": ("Candidate subsets: every validation recording", False),
 }
 
@@ -68,13 +82,27 @@ def table_caption(name):
     return name, True
 
 
+#: name -> caption, in the page's order; a caption says what to see (the command may give a
+#: figure a caption of its own, with the run's numbers)
 FIGURES = {
-    "estimate": "Estimated against measured torque on a test recording, +-2 std band and "
-    "filtered state probabilities (thesis Fig. C.2)",
-    "relevance": "Feature relevance over the accuracy/smoothness trade-offs (thesis Fig. 4)",
-    "state_selection": "State selection: mean validation metrics against K, chosen K dashed "
-    "(thesis Fig. 8)",
-    "drivers": "Final model against the baseline per driver on the test set (thesis Fig. 9)",
+    "estimate": "Estimated against measured torque on a test recording, with the +-2 std band "
+    "and the filtered state probabilities (thesis Fig. C.2): the band should hold the measured "
+    "torque, and the states switch where the manoeuvre does",
+    "models_estimate": "Every model's estimate against the measured torque on one test recording",
+    "state_selection": "State selection (thesis Fig. 8): mean validation metrics against K, "
+    "the 1% rules drawn (the gain of each added state on the performance score), the chosen "
+    "K dashed",
+    "trade_off": "Accuracy against smoothness: the candidate subsets on the validation "
+    "recordings (left) and every model on the test recordings (right); up and to the left is "
+    "better",
+    "closed_loop": "A driver model at the wheel of a held-out road beside the human: lateral "
+    "deviation from the lane centre and steering torque",
+    "drivers": "Final model against the baseline per driver on the test set (thesis Fig. 9): "
+    "the gap between the bars is what the selection costs (accuracy) or gains (smoothness) "
+    "for each driver; the whiskers: one standard deviation over the driver's test recordings",
+    "relevance": "Feature relevance over the accuracy/smoothness trade-offs (thesis Fig. 4): "
+    "how often a feature is in a validation recording's best subset; bright on the left "
+    "(100/0) it serves accuracy, bright on the right (0/100) smoothness",
 }
 
 STYLE = """
@@ -84,7 +112,16 @@ th, td { border: 1px solid #ccc; padding: 2px 6px; text-align: right; }
 th { background: #f0f0f0; }
 img { max-width: 100%; }
 .meta td { text-align: left; }
+td.text, th.text { text-align: left; }
 figure { margin: 1em 0 2em; }
+figcaption { font-size: 0.9em; color: #444; }
+.wide { overflow-x: auto; max-width: 100%; }
+.answers li { margin: 0.2em 0; line-height: 1.4; }
+.answers { background: #f6f8fa; border-left: 4px solid #2a6fb0; padding: 0.5em 1.2em; }
+.answers h3 { margin-bottom: 0.2em; }
+.answers p { margin-top: 0.2em; line-height: 1.45; }
+pre { background: #f0f0f0; padding: 0.4em 0.8em; overflow-x: auto; }
+.note { color: #8a4b00; }
 """
 
 
@@ -169,7 +206,7 @@ def _cell(value):
     return value
 
 
-def write_report(output, *, tables, figures, meta, overwrite=False):
+def write_report(output, *, tables, figures, meta, files=None, overwrite=False):
     """Write tables (CSV), figures (PNG), the manifest and the HTML page into ``output``.
 
     The report is written into a temporary folder beside ``output`` and swapped in once
@@ -182,11 +219,18 @@ def write_report(output, *, tables, figures, meta, overwrite=False):
     output : str or path
         Folder, created (with its parents) if needed, replaced if it is a report.
     tables : dict of str to DataFrame
-    figures : dict of str to matplotlib.figure.Figure
-        Saved at 110 dpi and closed.
+    figures : dict of str to matplotlib.figure.Figure or (Figure, str)
+        Saved at 110 dpi and closed; a pair gives the figure its caption (else the one of
+        :data:`FIGURES`).
     meta : dict
-        JSON-serialisable; keys ``title``, ``text`` (list of paragraphs) and ``details``
-        (label -> value, shown as a table) are rendered, the rest is kept in the manifest.
+        JSON-serialisable; keys ``title``, ``text`` (list of paragraphs), ``answers`` (list
+        of ``{"question", "answer"}``, shown first), ``notes`` (parts left out),
+        ``details`` (label -> value, shown as a table) are rendered, the rest is kept in the
+        manifest.
+    files : callable, default=None
+        ``files(folder)`` writes more files into the report's folder (the saved models) and
+        returns their entries (``name``, ``file``, ``caption`` and any more keys, such as
+        ``code``: the lines that load it).
     overwrite : bool, default=False
         Also replace a file, or a folder holding files that are not of a report.
 
@@ -207,7 +251,9 @@ def write_report(output, *, tables, figures, meta, overwrite=False):
     staging = output.parent / f".{output.name}.{os.getpid()}-{secrets.token_hex(4)}.partial"
     staging.mkdir()
     try:
-        manifest = {**meta, "tables": [], "figures": []}
+        # the files first: their callback may complete ``meta`` (what they are, what was skipped)
+        files = [] if files is None else files(staging)
+        manifest = {**meta, "tables": [], "figures": [], "files": []}
         for name, table in tables.items():
             file = f"{name}.csv"
             table.apply(lambda column: column.map(_cell)).to_csv(staging / file, index=False)
@@ -216,11 +262,13 @@ def write_report(output, *, tables, figures, meta, overwrite=False):
             entry.update(rows=len(table), sha256=_sha256(staging / file))
             manifest["tables"].append(entry)
         for name, fig in figures.items():
+            fig, caption = fig if isinstance(fig, tuple) else (fig, FIGURES.get(name, ""))
             file = f"{name}.png"
             fig.savefig(staging / file, dpi=110)
-            caption = FIGURES.get(name, "")
             entry = {"name": name, "file": file, "caption": caption}
             manifest["figures"].append({**entry, "sha256": _sha256(staging / file)})
+        for entry in files:
+            manifest["files"].append({**entry, "sha256": _sha256(staging / entry["file"])})
         (staging / MANIFEST).write_text(json.dumps(manifest, indent=2, default=str))
         render_html(staging)
         _swap(staging, output)
@@ -229,7 +277,7 @@ def write_report(output, *, tables, figures, meta, overwrite=False):
             import matplotlib.pyplot as plt
 
             for fig in figures.values():
-                plt.close(fig)
+                plt.close(fig[0] if isinstance(fig, tuple) else fig)
         shutil.rmtree(staging, ignore_errors=True)
     return output / PAGE
 
@@ -258,7 +306,7 @@ def foreign_files(folder):
         manifest = read_manifest(folder)
     except (OSError, ValueError):
         return sorted(present)
-    listed = {MANIFEST, PAGE, *(e["file"] for e in manifest["tables"] + manifest["figures"])}
+    listed = {MANIFEST, PAGE, *(e["file"] for e in _entries(manifest))}
     return sorted(present - listed)
 
 
@@ -299,7 +347,8 @@ def read_manifest(folder):
         raise ValueError(f"{path} is not valid JSON ({exc}); rerun the command") from None
     if not isinstance(manifest, dict):
         raise ValueError(f"{path} must hold a JSON object, not {type(manifest).__name__}")
-    for key, fields in (("tables", TABLE_FIELDS), ("figures", FIGURE_FIELDS)):
+    manifest.setdefault("files", [])
+    for key, fields in LISTS.items():
         entries = manifest.get(key)
         if not isinstance(entries, list):
             found = "lacks the key" if key not in manifest else "has no list under"
@@ -310,6 +359,11 @@ def read_manifest(folder):
                 raise ValueError(f"{path}: entry {k} of {key!r} lacks {lacking}")
             _check_inside(folder, entry["file"], f"{path}: {key} entry {entry['name']!r}")
     return manifest
+
+
+def _entries(manifest):
+    """Every file entry of a checked manifest: tables, figures and saved models."""
+    return [entry for key in LISTS for entry in manifest[key]]
 
 
 def _check_inside(folder, name, where):
@@ -324,7 +378,7 @@ def _check_inside(folder, name, where):
 def check_files(folder, manifest):
     """ValueError naming the first file listed in the manifest that is missing or changed."""
     where = Path(folder) / MANIFEST
-    for entry in manifest["tables"] + manifest["figures"]:
+    for entry in _entries(manifest):
         file = Path(folder) / entry["file"]
         if not file.is_file():
             raise ValueError(f"{file} is listed in {where} but missing")
@@ -388,7 +442,32 @@ def render_html(output):
     title = html.escape(manifest.get("title", "skhmmgmr report"))
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{title}</title>"]
     parts.append(f"<style>{STYLE}</style></head><body><h1>{title}</h1>")
-    parts += [f"<p>{html.escape(p)}</p>" for p in manifest.get("text", [])]
+    parts += _answers_html(manifest)
+    tables = {t["name"]: t for t in manifest["tables"]}
+    if "models" in tables:
+        parts.append(_section(output, tables.pop("models"), level=2))
+    if manifest["figures"]:
+        parts.append("<h2>Figures</h2>")
+    for figure in manifest["figures"]:
+        data = base64.b64encode((output / figure["file"]).read_bytes()).decode("ascii")
+        parts.append(
+            f"<figure id='figure-{html.escape(figure['name'])}'>"
+            f"<img alt='{html.escape(figure['name'])}' src='data:image/png;base64,{data}'>"
+            f"<figcaption>{html.escape(figure['caption'])}</figcaption></figure>"
+        )
+    parts += _files_html(manifest["files"])
+    for name in ("lane_keeping", "test_summary", "per_driver"):
+        if name in tables:
+            parts.append(_section(output, tables.pop(name), level=2))
+    text = manifest.get("text", [])
+    if text:
+        parts.append("<h2>What was run</h2>")
+        parts += [f"<p>{html.escape(p)}</p>" for p in text]
+    parts.append("<h2>Tables</h2>")
+    parts += [_section(output, table, level=3) for table in tables.values() if table["shown"]]
+    hidden = [t["file"] for t in tables.values() if not t["shown"]]
+    if hidden:
+        parts.append(f"<p>Also saved: {', '.join(f'<code>{f}</code>' for f in hidden)}.</p>")
     details = manifest.get("details", {})
     if details:
         rows = "".join(
@@ -396,24 +475,6 @@ def render_html(output):
             for k, v in details.items()
         )
         parts.append(f"<h2>Run</h2><table class='meta'>{rows}</table>")
-    tables = {t["name"]: t for t in manifest["tables"]}
-    for name in ("test_summary", "per_driver"):
-        if name in tables:
-            parts.append(_section(output, tables.pop(name), level=2))
-    if manifest["figures"]:
-        parts.append("<h2>Figures</h2>")
-    for figure in manifest["figures"]:
-        data = base64.b64encode((output / figure["file"]).read_bytes()).decode("ascii")
-        parts.append(
-            f"<figure><img alt='{html.escape(figure['name'])}' "
-            f"src='data:image/png;base64,{data}'>"
-            f"<figcaption>{html.escape(figure['caption'])}</figcaption></figure>"
-        )
-    parts.append("<h2>Tables</h2>")
-    parts += [_section(output, table, level=3) for table in tables.values() if table["shown"]]
-    hidden = [t["file"] for t in tables.values() if not t["shown"]]
-    if hidden:
-        parts.append(f"<p>Also saved: {', '.join(f'<code>{f}</code>' for f in hidden)}.</p>")
     versions_found = manifest.get("versions", {})
     if versions_found:
         text = ", ".join(f"{k} {v}" for k, v in versions_found.items())
@@ -422,9 +483,73 @@ def render_html(output):
     return write_atomically(output / PAGE, "\n".join(parts))
 
 
+def _answers_html(manifest):
+    """The page's first section: the run's answers in plain words, and what was left out."""
+    answers, notes = manifest.get("answers", []), manifest.get("notes", [])
+    if not answers and not notes:
+        return []
+    parts = ["<div class='answers' id='answers'><h2>In short</h2>"]
+    for item in answers:
+        parts.append(f"<h3>{html.escape(item['question'])}</h3>")
+        answer = item["answer"]
+        if isinstance(answer, str):
+            parts.append(f"<p>{html.escape(answer)}</p>")
+        else:
+            first, *lines = answer
+            items = "".join(f"<li>{html.escape(line)}</li>" for line in lines)
+            parts.append(f"<p>{html.escape(first)}</p><ul>{items}</ul>")
+    parts += [f"<p class='note'>{html.escape(note)}</p>" for note in notes]
+    parts.append("</div>")
+    return parts
+
+
+def _files_html(files):
+    """The saved models, one block per model: its inputs, then every file, what it is and
+    the lines of code that load it."""
+    if not files:
+        return []
+    parts = ["<h2 id='saved-models'>Saved models</h2>"]
+    by_model = {}
+    for entry in files:
+        by_model.setdefault(entry.get("model", entry["name"]), []).append(entry)
+    for entries in by_model.values():
+        first = entries[0]
+        parts.append(f"<h3>{html.escape(first.get('label', first['name']))}</h3>")
+        if first.get("inputs"):
+            inputs = ", ".join(first["inputs"])
+            parts.append(f"<p>Inputs, in this order: {html.escape(inputs)}.</p>")
+        parts.append("<table class='meta'>")
+        for entry in entries:
+            code = entry.get("code")
+            shown = f"<pre>{html.escape(code)}</pre>" if code else ""
+            parts.append(
+                f"<tr><td><code>{html.escape(entry['file'])}</code></td>"
+                f"<td class='text'>{html.escape(entry['caption'])}</td>"
+                f"<td class='text'>{shown}</td></tr>"
+            )
+        parts.append("</table>")
+    return parts
+
+
+#: Tables of few rows and many columns, shown transposed (one column per row of the CSV).
+TRANSPOSED = ("lane_keeping",)
+
+
 def _section(output, entry, *, level):
     table = pd.read_csv(output / entry["file"])
+    if entry["name"] in TRANSPOSED:
+        first = table.columns[0]
+        table = table.set_index(first).T.infer_objects()
+        table.columns.name = None
+        table = table.rename_axis("metric").reset_index()
     caption = html.escape(entry["caption"])
-    return f"<h{level} id='{entry['name']}'>{caption}</h{level}>" + _table_html(
-        table, entry["file"]
+    body = _table_html(table, entry["file"])
+    # text columns (labels, uses, feature lists) read from the left
+    numeric = pd.api.types.is_numeric_dtype
+    texts = [i + 1 for i, column in enumerate(table.columns) if not numeric(table[column])]
+    rule = ", ".join(f"#{entry['name']}-table td:nth-child({i})" for i in texts)
+    style = f"<style>{rule} {{ text-align: left; }}</style>" if texts else ""
+    return (
+        f"<h{level} id='{entry['name']}'>{caption}</h{level}>{style}"
+        f"<div class='wide' id='{entry['name']}-table'>{body}</div>"
     )

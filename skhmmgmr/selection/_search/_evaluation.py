@@ -28,8 +28,8 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GroupKFold, check_cv
 from sklearn.utils.validation import check_memory
 from threadpoolctl import threadpool_limits
-from tqdm.auto import tqdm
 
+from ..._core._progress import progress_bar
 from ..._core._validation import check_sampling_period
 from ..._version import __version__
 from ...cluster._scatter import dask_client, scatter_once
@@ -320,7 +320,9 @@ def evaluate_models(
         # k-means fallback to scikit-learn), and the parallelism is over models (joblib
         # workers get their own limits).
         with threadpool_limits(limits=1):
-            tables = list(tqdm(parallel(jobs), total=len(tasks), desc=desc, disable=not verbose))
+            tables = list(
+                progress_bar(parallel(jobs), total=len(tasks), desc=desc, disable=not verbose)
+            )
     if not tables:
         return pd.DataFrame(columns=["model", "fold", "recording", "n_samples", *METRICS])
     in_order = sorted(zip(tasks, tables, strict=True), key=lambda item: item[0])
