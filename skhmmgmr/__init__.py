@@ -24,7 +24,7 @@ from .metrics import AccuracyScore, PerformanceScore, SmoothnessScore
 from .selection import SelectionReport, select_parameters
 from .state_selection import StateSelector
 from .streaming import FilterStream
-from .torque_pipeline import SteeringFeatures, make_torque_pipeline
+from .torque_pipeline import SteeringFeatures, make_driver_model, make_torque_pipeline
 
 __all__ = [
     "AccuracyScore",
@@ -47,6 +47,7 @@ __all__ = [
     "datasets",
     "export",
     "feature_selection",
+    "make_driver_model",
     "make_torque_pipeline",
     "metrics",
     "select_parameters",

@@ -104,6 +104,7 @@ BAD_CALLS = [
     (state_selection.select_n_states, (Y[:, None], Y), {"k_max": 0}, "k_max"),
     (state_selection.state_choices, (TABLE,), {"tol": -0.1}, "tol"),
     (utils.expected_failed_checks, (object(),), {}, "estimator"),
+    (selection.make_closed_loop_scorer, (), {"aggregate": "median"}, "aggregate"),
     # the metrics
     (metrics.accuracy_score, (Y, Y), {"multioutput": "variance_weighted"}, "multioutput"),
     (metrics.smoothness_score, (Y,), {"sampling_period": np.inf}, "sampling_period"),
@@ -126,6 +127,7 @@ BAD_CALLS = [
     (datasets.drive, ("defensive",), {"duration": -1.0}, "duration"),
     (datasets.draw_vehicle, (), {"random_state": "seed"}, "random_state"),
     (datasets.make_driving_protocol, (), {"cache": 3}, "cache"),
+    (datasets.make_driving_protocol, (), {"perturbed_share": 1.5}, "perturbed_share"),
     (datasets.make_lane_keeping, (), {"driver": "racer"}, "driver"),
     (datasets.make_lane_keeping, (), {"sampling_rate": True}, "sampling_rate"),
     (datasets.get_data_home, (3,), {}, "data_home"),

@@ -26,6 +26,7 @@ from skhmmgmr import (
     SpearmanSelector,
     StateSelector,
     SteeringFeatures,
+    make_driver_model,
 )
 from skhmmgmr.utils import expected_failed_checks
 
@@ -35,6 +36,14 @@ PERIOD = 0.05
 ONE_RECORDING = ShuffleSplit(n_splits=1, test_size=0.5, random_state=0)
 SEARCH = {"sampling_period": PERIOD, "cv": ONE_RECORDING}
 
+DRIVER_MODEL_CHECKED = dict(
+    friction_velocity=0.1,
+    velocity_filter=None,
+    friction_column=0,
+    load_columns=(0,),
+    output_smoothing=None,
+    random_state=0,
+)
 # Every public estimator, with small valid parameters under which every check can run.
 ESTIMATORS = [
     HMMGMRRegressor(n_states=2, random_state=0),
@@ -53,6 +62,10 @@ ESTIMATORS = [
     SteeringFeatures(friction_column=0, load_columns=(0,)),
     # the friction band chosen in fit, on the target the checks give
     SteeringFeatures(friction_velocity="auto", friction_column=0, load_columns=(0,)),
+    # the driver model (a Pipeline): columns by position, no read-out across rows; one state,
+    # then two (a causal filter, as the regressor's)
+    make_driver_model(**DRIVER_MODEL_CHECKED),
+    make_driver_model(2, **DRIVER_MODEL_CHECKED),
 ]
 # Configurations as users write them, for which fit (or predict) cannot run on the checks'
 # data: every check that needs it is declared, and must fail.
@@ -93,6 +106,8 @@ def test_every_public_estimator_is_checked():
         for name in skhmmgmr.__all__
         if inspect.isclass(obj := getattr(skhmmgmr, name)) and issubclass(obj, BaseEstimator)
     }
+    # and what the public factories build (the torque pipeline is checked as a driver model)
+    public.add(type(make_driver_model()))
     assert public == {type(estimator) for estimator in ESTIMATORS}
 
 

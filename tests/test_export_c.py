@@ -24,8 +24,14 @@ from sklearn.exceptions import ConvergenceWarning, NotFittedError
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 
-from skhmmgmr import FilterStream, HMMGMRRegressor, SteeringFeatures, make_torque_pipeline
-from skhmmgmr.datasets import FEATURE_NAMES, make_driving_protocol
+from skhmmgmr import (
+    FilterStream,
+    HMMGMRRegressor,
+    SteeringFeatures,
+    make_driver_model,
+    make_torque_pipeline,
+)
+from skhmmgmr.datasets import DRIVER_MODEL_FEATURES, FEATURE_NAMES, make_driving_protocol
 from skhmmgmr.export import write_c
 
 CC = shutil.which("cc")
@@ -308,6 +314,32 @@ def test_the_pipelines_held_samples_and_velocity_gaps(pipeline, protocol):
     scale = regressor.model_.standardization.output_scale
     _close(estimates[:, 0], [e for e, _ in expected], scale)
     _close(stds[:, 0], [s for _, s in expected], scale)
+
+
+def test_the_driver_model_is_exported_as_the_pipeline_it_is(tmp_path):
+    # make_driver_model's fit alone differs (the perturbation's penalty): its C filter gives
+    # the estimates and std of its predict, and never reads the perturbation.
+    data = make_driving_protocol(
+        ("aggressive",),
+        n_train_per_setting=1,
+        n_validation=0,
+        n_test=1,
+        duration=8.0,
+        sampling_rate=20.0,
+        random_state=1,
+        perturbation=0.1,
+    )
+    columns = list(DRIVER_MODEL_FEATURES)
+    driver = make_driver_model(velocity_filter=0.05, sampling_period=0.05, random_state=0)
+    driver.fit(
+        data[columns],
+        data["driver_torque"],
+        groups=data["recording"],
+        perturbation=data["steering_perturbation"],
+    )
+    compiled = Compiled(driver, tmp_path, name="driver")
+    assert compiled.n_inputs == len(columns)
+    _compiled_is_predict(driver, compiled, data[columns], data["recording"])
 
 
 def test_float32_stays_close_to_predict(protocol, tmp_path):

@@ -26,8 +26,14 @@ import numpy as np
 import pytest
 from sklearn.exceptions import ConvergenceWarning
 
-from skhmmgmr import HierarchicalHMMGMRRegressor, HMMGMRRegressor, make_torque_pipeline
+from skhmmgmr import (
+    HierarchicalHMMGMRRegressor,
+    HMMGMRRegressor,
+    make_driver_model,
+    make_torque_pipeline,
+)
 from skhmmgmr.datasets import (
+    DRIVER_MODEL_FEATURES,
     FEATURE_NAMES,
     FEATURE_UNITS,
     PREVIEW_FEATURES,
@@ -542,6 +548,47 @@ def test_the_pipelines_fmu_drives_as_the_pipeline(models, tmp_path):
     assert len(caught) == 2 * (by_model.attrs["lost_control"] is not None)
     columns = [*FEATURE_NAMES, "driver_torque"]
     np.testing.assert_allclose(by_fmu[columns], by_model[columns], rtol=1e-9, atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def driver_model():
+    """A driver model fitted on a perturbation experiment, and a test recording without one."""
+    data = make_driving_protocol(
+        ("defensive",),
+        n_train_per_setting=1,
+        n_validation=0,
+        n_test=1,
+        duration=8.0,
+        sampling_rate=1 / PERIOD,
+        random_state=0,
+        perturbation=0.1,
+    )
+    train, test = data[data["split"] == "train"], data[data["split"] == "test"]
+    inputs = list(DRIVER_MODEL_FEATURES)
+    model = make_driver_model(velocity_filter=0.05, sampling_period=PERIOD, random_state=0)
+    model.fit(
+        train[inputs],
+        train["driver_torque"],
+        groups=train["recording"],
+        perturbation=train["steering_perturbation"],
+    )
+    return model, test
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+def test_the_driver_models_fmu_is_valid_and_reproduces_predict(driver_model, version, tmp_path):
+    """The FMU of #46's last item: the driver model's (no perturbation among its inputs)."""
+    model, test = driver_model
+    path = write_fmu(model, tmp_path / "driver.fmu", fmi_version=version)
+    assert validate_fmu(str(path)) == []
+    exported = Exported("driver", version, model, path)
+    assert exported.inputs == list(DRIVER_MODEL_FEATURES)
+    X, groups = test[exported.inputs], test["recording"]
+    run = exported.simulate(X, groups)
+    expected, expected_std = model.predict(X, groups=groups, return_std=True)
+    assert not run.codes.any()
+    _close(exported, run.estimates, expected)
+    _close(exported, run.stds, expected_std)
 
 
 def test_drive_refuses_an_fmu_it_cannot_run(preview_model, protocol, tmp_path, monkeypatch):

@@ -2,7 +2,8 @@
 
 A dataset is a tidy :class:`pandas.DataFrame` with one row per sample. Rows of one recording are
 contiguous and in time order. The meta columns come first, then the candidate features, then the
-driver torque (the regression target).
+driver torque (the regression target), then the columns of an experiment, if any (the torque of a
+perturbation experiment).
 """
 
 RECORDING = "recording"
@@ -18,6 +19,14 @@ MANOEUVRE = "manoeuvre"
 CROSSING_TIME = "crossing_time"
 MANOEUVRES = ("lane_keeping", "lane_change_left", "lane_change_right", "evasive")
 META_COLUMNS = (RECORDING, DRIVER, SETTING, SPLIT, TIME, MANOEUVRE, CROSSING_TIME)
+# The torque of a perturbation experiment on the steering wheel (simulated frames made with
+# perturbation=; 0 where a recording had none): a label of the recording, after the target,
+# which a model may read in fit and never needs as an input. EXPERIMENT_COLUMNS are the
+# optional columns after the target; like the meta columns, never features.
+STEERING_PERTURBATION = "steering_perturbation"
+EXPERIMENT_COLUMNS = (STEERING_PERTURBATION,)
+#: Units of the numeric labels.
+LABEL_UNITS = {CROSSING_TIME: "s", STEERING_PERTURBATION: "Nm"}
 
 # The 18 candidate features of the thesis (Table B.2), in its order, with SI units.
 FEATURE_UNITS = {
@@ -52,5 +61,12 @@ PREVIEW_FEATURES = (
     "road_curvature_10m",
     "heading_deviation_30m",
     "road_curvature_30m",
+)
+# What a driver model reads (make_driver_model): every sensed feature but the steering wheel's
+# acceleration, which the logger differentiates twice from the angle (a few samples late): at the
+# wheel a model's torque would follow it, a delayed positive feedback on the wheel's inertia
+# that makes the model oscillate at 20 Hz.
+DRIVER_MODEL_FEATURES = tuple(
+    name for name in FEATURE_NAMES if name != "steering_wheel_acceleration"
 )
 TARGET_UNIT = "Nm"

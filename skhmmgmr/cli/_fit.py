@@ -11,7 +11,7 @@ import inspect
 
 import pandas as pd
 
-from .._core._schema import META_COLUMNS
+from .._core._schema import EXPERIMENT_COLUMNS, META_COLUMNS
 from .._core._sequences import median_time_step
 from ..datasets import TIME
 from ._files import (
@@ -51,7 +51,7 @@ def _feature_columns(frame, args):
         if repeated:
             raise CommandError(f"--features names {repeated} more than once")
         return list(args.features)
-    excluded = {*roles, TIME, *META_COLUMNS}
+    excluded = {*roles, TIME, *META_COLUMNS, *EXPERIMENT_COLUMNS}
     return [
         c for c in frame.columns if c not in excluded and pd.api.types.is_numeric_dtype(frame[c])
     ]

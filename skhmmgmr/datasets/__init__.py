@@ -3,6 +3,7 @@
 from .._core._panel import to_panel
 from .._core._schema import (
     DRIVER,
+    DRIVER_MODEL_FEATURES,
     FEATURE_NAMES,
     FEATURE_UNITS,
     PREVIEW_FEATURES,
@@ -61,6 +62,7 @@ __all__ = [
     "torque_ahead",
     "to_panel",
     "DRIVER",
+    "DRIVER_MODEL_FEATURES",
     "FEATURE_NAMES",
     "FEATURE_UNITS",
     "PREVIEW_FEATURES",

@@ -14,12 +14,15 @@ import pandas as pd
 from .._core._schema import (
     CROSSING_TIME,
     DRIVER,
+    EXPERIMENT_COLUMNS,
     FEATURE_UNITS,
+    LABEL_UNITS,
     MANOEUVRE,
     META_COLUMNS,
     RECORDING,
     SETTING,
     SPLIT,
+    STEERING_PERTURBATION,
     TARGET,
     TARGET_UNIT,
     TIME,
@@ -73,8 +76,10 @@ def tidy_frame(
     frame : pandas.DataFrame
         The meta columns ``recording, driver, setting, split, time`` (``time`` only if given),
         then ``manoeuvre`` (text) and ``crossing_time`` (seconds, NaN allowed) if given,
-        the other columns in the order given, then ``driver_torque`` if given. Recording,
-        driver and split are text; the time, the features and the target are float64; the
+        the other columns in the order given, then ``driver_torque`` if given, then
+        ``steering_perturbation`` (the torque of a perturbation experiment, Nm) if given.
+        Recording, driver and split are text; the time, the features and the target are
+        float64; the
         setting keeps its dtype. ``attrs["units"]`` maps the time, feature and target columns,
         in column order, to their units.
 
@@ -106,7 +111,7 @@ def tidy_frame(
     if uneven:
         raise ValueError(f"The columns have different lengths: {lengths}.")
     given = {**META_DEFAULTS, **given}
-    others = [c for c in given if c not in META_COLUMNS and c != TARGET]
+    others = [c for c in given if c not in (*META_COLUMNS, *EXPERIMENT_COLUMNS, TARGET)]
     numeric = [TIME] * (TIME in given) + others + [TARGET] * (TARGET in given)
 
     out = {name: _values(given[name], n_rows) for name in (RECORDING, DRIVER, SETTING, SPLIT)}
@@ -117,6 +122,11 @@ def tidy_frame(
     if CROSSING_TIME in given:
         out[CROSSING_TIME] = _floats(CROSSING_TIME, given[CROSSING_TIME], n_rows)
     out.update({name: _floats(name, given[name], n_rows) for name in numeric})
+    if STEERING_PERTURBATION in given:
+        out[STEERING_PERTURBATION] = _floats(
+            STEERING_PERTURBATION, given[STEERING_PERTURBATION], n_rows
+        )
+        numeric.append(STEERING_PERTURBATION)
     rows = _Rows(n_rows, source, row, out.get(TIME))
     out[RECORDING] = rows.recording = rows.text(RECORDING, out[RECORDING])
     for name in (DRIVER, SPLIT, MANOEUVRE):
@@ -130,7 +140,7 @@ def tidy_frame(
         rows.check_time(codes, sampling_rate)
 
     frame = pd.DataFrame(out)
-    all_units = {TIME: "s", CROSSING_TIME: "s", TARGET: TARGET_UNIT, **FEATURE_UNITS}
+    all_units = {TIME: "s", **LABEL_UNITS, TARGET: TARGET_UNIT, **FEATURE_UNITS}
     all_units.update(units or {})
     measured = [c for c in frame.columns if c in numeric or c == CROSSING_TIME]
     frame.attrs["units"] = {name: all_units.get(name, UNKNOWN) for name in measured}

@@ -7,16 +7,19 @@ that runs them in turn.
 """
 
 from ._candidates import candidate_subsets, compare_subsets, feature_relevance
+from ._closed_loop import ClosedLoopScorer, make_closed_loop_scorer
 from ._framework import SelectionReport, select_parameters
 from ._search._score_tables import one_way_anova
 from ._sources import RelevanceSource
 
 __all__ = [
+    "ClosedLoopScorer",
     "RelevanceSource",
     "SelectionReport",
     "candidate_subsets",
     "compare_subsets",
     "feature_relevance",
+    "make_closed_loop_scorer",
     "one_way_anova",
     "select_parameters",
 ]

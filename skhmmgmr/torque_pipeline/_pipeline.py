@@ -402,6 +402,18 @@ class TorquePipeline(PickleVersionMixin, Pipeline):
         return self._final_method("score", X, groups, y=y, per_row=per_row, **params)
 
 
+def check_regressor_params(params, caller, own):
+    """Refuse a factory's ``params`` that are not :class:`~skhmmgmr.HMMGMRRegressor`'s,
+    naming the factory (``caller``) and its own parameters (``own``)."""
+    accepted = HMMGMRRegressor().get_params()
+    unknown = sorted(set(params) - set(accepted))
+    if unknown:
+        raise TypeError(
+            f"{caller} got unknown parameter(s) {unknown}; it takes {own} and "
+            f"HMMGMRRegressor's parameters {sorted(accepted)}."
+        )
+
+
 @fill_shared_parameters
 def make_torque_pipeline(
     n_states=5,
@@ -477,15 +489,12 @@ def make_torque_pipeline(
     >>> model.predict(data[list(FEATURE_NAMES)]).shape
     (600,)
     """
-    accepted = HMMGMRRegressor().get_params()
-    unknown = sorted(set(params) - set(accepted))
-    if unknown:
-        raise TypeError(
-            f"make_torque_pipeline got unknown parameter(s) {unknown}; it takes n_states, "
-            "friction_velocity, load_columns, powers, velocity_filter, sampling_period, "
-            "output_smoothing, friction_angle and HMMGMRRegressor's "
-            f"parameters {sorted(accepted)}."
-        )
+    check_regressor_params(
+        params,
+        "make_torque_pipeline",
+        "n_states, friction_velocity, load_columns, powers, velocity_filter, sampling_period, "
+        "output_smoothing, friction_angle",
+    )
     return TorquePipeline(
         [
             (

@@ -28,6 +28,7 @@ from .._hmm._portable import (
 )
 from .._version import __version__
 from ..estimator import HierarchicalHMMGMRRegressor, HMMGMRRegressor
+from ._driver_model import DriverModel
 from ._pipeline import TorquePipeline
 from ._steering_features import SteeringFeatures, restore_steering_features
 
@@ -36,7 +37,14 @@ MODEL_TYPES = {
     REGRESSOR_TYPE: HMMGMRRegressor,
     HIERARCHICAL_TYPE: HierarchicalHMMGMRRegressor,
     "TorquePipeline": TorquePipeline,
+    "DriverModel": DriverModel,
     "Pipeline": Pipeline,
+}
+#: A driver model's block (``driver_model``): its trade-off, then the fitted facts of the
+#: perturbation it was fitted on, by key and attribute.
+DRIVER_MODEL_FACTS = {
+    "perturbation_rms": "perturbation_rms_",
+    "perturbed_share": "perturbed_share_",
 }
 STEERING_TYPE = "SteeringFeatures"
 STEERING_PARAMS = (
@@ -103,7 +111,7 @@ def model_to_dict(fitted, *, output_names, units, period):
         periods = [step.sampling_period_ for _, step in transformers]
         period = next((p for p in periods if p is not None), None)
     names = [*_inputs_of(steps[0]), *model["output_names"]]
-    return {
+    data = {
         "format": FORMAT_NAME,
         "format_version": model["format_version"],  # the lowest that holds the regressor
         "package_version": __version__,
@@ -111,6 +119,12 @@ def model_to_dict(fitted, *, output_names, units, period):
         "training": _training({}, units, period, names),
         "steps": steps,
     }
+    if model_type == "DriverModel":
+        data["driver_model"] = {
+            "perturbation_penalty": float(fitted.perturbation_penalty),
+            **{key: float(getattr(fitted, name)) for key, name in DRIVER_MODEL_FACTS.items()},
+        }
+    return data
 
 
 def _inputs_of(step):
@@ -232,7 +246,13 @@ def _pipeline_from_dict(data, cls):
     longest = regressor.longest_recording_
     if longest is not None:
         training = {"longest_recording": longest, **training}
-    return cls(steps), training
+    if cls is not DriverModel:
+        return cls(steps), training
+    block = data["driver_model"]
+    model = DriverModel(steps, perturbation_penalty=block["perturbation_penalty"])
+    for key, name in DRIVER_MODEL_FACTS.items():
+        setattr(model, name, block[key])
+    return model, training
 
 
 def _regressor_step(model, where, kind):

@@ -370,7 +370,9 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             added to ``attrs["units"]`` when the source columns have units there.
         """
         check_is_fitted(self, "n_features_in_")
-        frame = X if isinstance(X, pd.DataFrame) else None
+        # a frame keeps its columns when they are names (strings), as scikit-learn reads them
+        named = isinstance(X, pd.DataFrame) and hasattr(self, "feature_names_in_")
+        frame = X if named else None
         values = validate_data(self, X, ensure_all_finite="allow-nan", reset=False)
         positions = self._sources()
         derived = {}

@@ -13,10 +13,12 @@ from ..._core._compat import FiniteInterval, validate_params
 from ..._core._schema import (
     CROSSING_TIME,
     DRIVER,
+    EXPERIMENT_COLUMNS,
     MANOEUVRE,
     META_COLUMNS,
     RECORDING,
     SPLIT,
+    STEERING_PERTURBATION,
     TARGET,
     TIME,
 )
@@ -28,8 +30,9 @@ _PARQUET_SUFFIXES = (".parquet", ".pq")
 _SOURCE = "__source__"
 _ROW = "__row__"
 # The package's own labels of a simulated frame (what the driver does, when it crosses a
-# marking): metadata kept as they are when a source has them, never features.
-_LABELS = (MANOEUVRE, CROSSING_TIME)
+# marking, the torque of a perturbation experiment): metadata kept as they are when a source
+# has them, never features.
+_LABELS = (MANOEUVRE, CROSSING_TIME, STEERING_PERTURBATION)
 
 
 def _suffix(path):
@@ -153,7 +156,7 @@ def _select(description, frame, stem, *, recording, time, target, features):
             f"columns are {available}. Name yours with the recording=, time=, target= and "
             "features= parameters."
         )
-    meta = {recording, time, target, *META_COLUMNS, TARGET}
+    meta = {recording, time, target, *META_COLUMNS, *EXPERIMENT_COLUMNS, TARGET}
     if features is not None and meta.intersection(features):
         raise ValueError(
             f"The features {sorted(meta.intersection(features))} are meta, time or target "

@@ -43,7 +43,9 @@ LOG_COLUMNS = (
 INITIAL_COLUMNS = ("theta", "theta_d", "theta_dd", "v", "r", "phi", "phi_d", "s", "e_y", "e_psi")
 
 
-def simulate(section, n_samples, torque_source=None, initial=None, column_log=None):
+def simulate(
+    section, n_samples, torque_source=None, initial=None, column_log=None, perturbation=None
+):
     """Integrate the closed loop of ``section`` for ``n_samples`` samples; return the log,
     an array (n_samples, 14) of :data:`LOG_COLUMNS`.
 
@@ -61,10 +63,12 @@ def simulate(section, n_samples, torque_source=None, initial=None, column_log=No
     (exact at rest only).
     ``column_log``: an array (n_samples, 2) that receives ``(theta_c, theta_c_d)`` at every
     logged sample (with a torsion bar; the rigid column writes the wheel's angle and velocity).
-    The logged torque is the torque sensor's: the driver's (the human's, or the torque
-    source's) with a rigid column; the torsion bar's ``k_c (theta - theta_c) + c_c (theta' -
-    theta_c')`` at the sample with a ``column_stiffness``, ``theta_c`` being the lower
-    column's angle (see :mod:`._vehicle`).
+    ``perturbation``: the torque of a perturbation experiment (:mod:`._perturbation`) at every
+    integration step, added to the driver's at the steering wheel; the driver does not know it.
+    The logged torque is the torque sensor's, less the perturbation (the driver's share): the
+    driver's (the human's, or the torque source's) with a rigid column; the torsion bar's
+    ``k_c (theta - theta_c) + c_c (theta' - theta_c')`` at the sample with a
+    ``column_stiffness``, ``theta_c`` being the lower column's angle (see :mod:`._vehicle`).
     """
     vehicle, dt, n_sub, road = section.vehicle, section.dt, section.n_sub, section.road
     human = None
@@ -79,10 +83,12 @@ def simulate(section, n_samples, torque_source=None, initial=None, column_log=No
     else:  # a torque source has no arm impedance of its own
         bar_torque, column = steering_column(vehicle, dt, 0.0, 0.0)
     rates = single_track(vehicle, section.speed)
+    if perturbation is not None:
+        perturbation = np.asarray(perturbation, dtype=float).tolist()
     curv, inv_ds = road.curvature.tolist(), 1.0 / (road.s[1] - road.s[0])
     start = _start(initial, vehicle)
     theta, theta_d, theta_dd, v, r, phi, phi_d, s, e_y, e_psi, sensed, theta_c, theta_c_d = start
-    s_d = e_y_d = e_psi_d = t_hand = 0.0
+    s_d = e_y_d = e_psi_d = t_hand = push = 0.0
     log = np.empty((n_samples, len(LOG_COLUMNS)))
     row = 0
     for k in range(n_samples * n_sub):
@@ -105,6 +111,8 @@ def simulate(section, n_samples, torque_source=None, initial=None, column_log=No
         )
         if bar_torque is not None:  # the torque sensor reads the torsion bar
             sensed = bar_torque(theta, theta_d, theta_c, theta_c_d)
+        if perturbation is not None:
+            push = perturbation[k]
         if sample:
             body = (v, a_y, r, r_d, phi, phi_d, phi_dd, s, e_y, e_psi)
             if column_log is not None:  # the lower column with the logged states
@@ -112,14 +120,19 @@ def simulate(section, n_samples, torque_source=None, initial=None, column_log=No
             if human is None:
                 states = (theta, theta_d, theta_dd, *body)
                 t_hand = torque_source(row, states)
-                log[row] = (*states, t_hand if bar_torque is None else sensed)
+                log[row] = (*states, t_hand if bar_torque is None else sensed - push)
                 row += 1
         # the torque at the steering wheel enters the column here, and only here
         theta_dd, theta_c, theta_c_d, sensed = column(
-            t_hand, sensed, aligning, theta_d, theta_c, theta_c_d
+            t_hand if perturbation is None else t_hand + push,
+            sensed,
+            aligning,
+            theta_d,
+            theta_c,
+            theta_c_d,
         )
         if human is not None and sample:
-            log[row] = (theta, theta_d, theta_dd, *body, sensed)
+            log[row] = (theta, theta_d, theta_dd, *body, sensed - push)
             row += 1
         theta_d += dt * theta_dd
         theta += dt * theta_d

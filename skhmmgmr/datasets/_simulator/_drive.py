@@ -44,6 +44,7 @@ def drive(
     recording=None,
     split="test",
     vehicle=None,
+    perturbation=None,
 ):
     """Put a driver at the wheel of the simulator and record the drive.
 
@@ -92,14 +93,20 @@ def drive(
     vehicle : None, "default", int, dict or VehicleParameters, default=None
         The car, see :func:`make_lane_keeping`. The same seeds in another car give the same
         road, manoeuvres and sensor errors (scaled by the car's ``sensor_noise``).
+    perturbation : float or None, default=None
+        A perturbation experiment (see :func:`make_lane_keeping`): the RMS [Nm] of a torque
+        on the steering wheel that the driver, human or model, does not know, added to its
+        torque and logged in ``steering_perturbation``; the same seeds give the same
+        perturbation for every driver.
 
     Returns
     -------
     frame : pandas.DataFrame
         The frame of :func:`make_lane_keeping`: ``recording, driver, setting, split, time``,
         the 18 sensed features as the model got them, and ``driver_torque``, the torque
-        sensor's reading: the driver's torque with a rigid column, the torsion bar's torque
-        in a car with a ``column_stiffness`` (see :class:`VehicleParameters`). A model that
+        sensor's reading (less the perturbation, if any): the driver's torque with a rigid
+        column, the torsion bar's torque in a car with a ``column_stiffness`` (see
+        :class:`VehicleParameters`). A model that
         loses control (lateral deviation beyond 10 m) ends the drive there: the frame is
         shorter, and
         ``frame.attrs["lost_control"]`` holds the time [s] (``None`` otherwise).

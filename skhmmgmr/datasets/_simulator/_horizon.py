@@ -48,7 +48,17 @@ _STATE_COLUMNS = [LOG_COLUMNS.index(name) for name in INITIAL_COLUMNS]
         "return_proba": ["boolean"],
         "recording": [str, None],
     }
-    | SectionSpec.constraints(),
+    | SectionSpec.constraints(  # every field but the perturbation, which a rollout never has
+        "duration",
+        "setting",
+        "speed_kmh",
+        "sampling_rate",
+        "scenario",
+        "random_state",
+        "road_random_state",
+        "sensor_noise",
+        "vehicle",
+    ),
     prefer_skip_nested_validation=False,
 )
 def torque_ahead(
@@ -146,7 +156,7 @@ def torque_ahead(
     >>> ahead.groupby("horizon").size().to_dict()
     {0.5: 18, 1.0: 18}
     """
-    spec = SectionSpec.of(locals(), "torque_ahead")
+    spec = SectionSpec.of(locals(), "torque_ahead", perturbation=None)
     parameters = check_driver(driver)
     stream, positions = model_stream(model, spec.sampling_rate)
     who, rate = f"The model {type(model).__name__}", spec.sampling_rate

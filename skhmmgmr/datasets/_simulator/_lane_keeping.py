@@ -52,6 +52,7 @@ def make_lane_keeping(
     split="train",
     sensor_noise="typical",
     vehicle=None,
+    perturbation=None,
     cache=None,
 ):
     """Simulate a driver keeping the centre lane of a pseudo-random highway section.
@@ -110,6 +111,11 @@ default="highway"
         replaced (``{"wheel_friction": 0.6}``). The car is drawn apart from ``random_state``:
         the same seeds give the same road, driver and noises in every car. The driver knows
         the car (its internal model is the car's).
+    perturbation : float or None, default=None
+        A perturbation experiment: the RMS [Nm] of a torque on the steering wheel that the
+        driver does not know (a multisine over 0.05-5 Hz, see Perturbation below), logged in
+        the column ``steering_perturbation``. None: no experiment and no such column (0 logs
+        a column of zeros).
     cache : str, path or joblib.Memory, default=None
         Cache the simulation on disk (only used when ``random_state`` is an int and
         ``road_random_state`` an int or None).
@@ -122,7 +128,8 @@ default="highway"
         ``"lane_change_right"`` or ``"evasive"``, by the car's position on the road) and
         ``crossing_time`` (on the rows of a manoeuvre, the time [s] at which the car's centre
         crosses a marking of the centre lane; NaN elsewhere or if it never does), then the 18
-        candidate features :data:`FEATURE_NAMES` (Table B.2) then ``driver_torque``. SI units,
+        candidate features :data:`FEATURE_NAMES` (Table B.2) then ``driver_torque`` (the
+        driver's), and with ``perturbation`` ``steering_perturbation`` [Nm]. SI units,
         listed in ``frame.attrs["units"]``; ``frame.attrs["lane_width"]`` is the lane's width,
         ``frame.attrs["vehicle"]`` the car's parameters (a dict of :class:`VehicleParameters`).
         Signs: y and yaw to the left; roll positive when the body leans right (outwards in a
@@ -172,6 +179,22 @@ default="highway"
     equal for the yaw acceleration and 3 times for the roll acceleration; the steering-wheel
     acceleration of the model has most of its power above the 4 Hz of the filter, so its
     measured version keeps mainly the low-frequency part (correlation about 0.4).
+
+    Perturbation (``perturbation=``). In a recording of ordinary driving the wheel moves only
+    as the driver turns it, so that the data cannot tell the driver's arms from the steering
+    system's load. As in neuromuscular-admittance experiments, a torque the driver cannot
+    predict is added to the driver's at the steering wheel: a multisine of up to 24 sines of
+    equal amplitude at frequencies spread evenly on a log scale over 0.05-5 Hz, each a whole
+    number of periods over the section (so that its RMS over the logged rows is
+    ``perturbation``), with uniformly drawn phases. Its random stream is its own: an int
+    ``random_state`` gives the road, driver, noises and sensor errors of the run without it.
+    The steering system cannot tell it from the driver's torque (the assist boosts it, a
+    torsion bar carries it); the driver feels it only through the wheel's motion: the arms'
+    stiffness, damping and inertia resist at once, the eyes after the reaction time. The
+    column ``driver_torque`` is the driver's own share (the torque sensor's reading less the
+    perturbation, which the experiment knows), ``steering_perturbation`` the perturbation,
+    exact (an applied, not a measured signal). A tenth of the driver's torque RMS (0.1-0.25
+    Nm) moves the wheel by a few tenths of a degree without changing how the car is driven.
 
     Examples
     --------

@@ -1,13 +1,14 @@
 """The data protocol of the thesis (Appendix B.4): training, validation and test sections."""
 
+import math
 from dataclasses import asdict, replace
-from numbers import Integral
+from numbers import Integral, Real
 
 import numpy as np
 from joblib import Parallel, delayed
 from sklearn.utils import check_random_state
 
-from ..._core._compat import Interval, validate_params
+from ..._core._compat import FiniteInterval, Interval, validate_params
 from .._frame import concat_frames
 from ._driver import DRIVER_STYLES
 from ._lane_keeping import CACHE, cached, human_run
@@ -16,6 +17,16 @@ from ._section import SectionSpec
 TRAIN_SETTINGS = (1, 2, 3, 4, 5, 6)
 EVALUATION_SETTING = 7
 _COUNT = [Interval(Integral, 0, None, closed="left")]
+
+
+def _perturbed(sections, share):
+    """Whether each section is perturbed: ``share`` of the training sections, spread evenly
+    over them (the k-th when ``(k + 1) * share`` reaches the next whole number)."""
+    flags, k = [], 0
+    for split, _, _ in sections:
+        flags.append(split == "train" and math.floor((k + 1) * share) > math.floor(k * share))
+        k += split == "train"
+    return flags
 
 
 def _sections(n_train_per_setting, n_validation, n_test):
@@ -37,9 +48,16 @@ def _sections(n_train_per_setting, n_validation, n_test):
         "random_state": ["random_state"],
         "n_jobs": [Integral, None],
         "cache": CACHE,
+        "perturbed_share": [FiniteInterval(Real, 0, 1, closed="both")],
     }
     | SectionSpec.constraints(
-        "duration", "sampling_rate", "speed_kmh", "scenario", "sensor_noise", "vehicle"
+        "duration",
+        "sampling_rate",
+        "speed_kmh",
+        "scenario",
+        "sensor_noise",
+        "vehicle",
+        "perturbation",
     ),
     prefer_skip_nested_validation=False,
 )
@@ -56,6 +74,8 @@ def make_driving_protocol(
     random_state=None,
     sensor_noise="typical",
     vehicle=None,
+    perturbation=None,
+    perturbed_share=1.0,
     n_jobs=None,
     cache=None,
 ):
@@ -93,6 +113,18 @@ def make_driving_protocol(
         reference car, an int the car :func:`draw_vehicle` draws from it. The car is drawn
         apart from ``random_state``: the same seed gives the same roads and drivers in every
         car.
+    perturbation : float or None, default=None
+        A perturbation experiment in ``perturbed_share`` of the training recordings: the RMS
+        [Nm] of a torque on the steering wheel that the driver does not know (see
+        :func:`make_lane_keeping`, Perturbation). The frame then has the column
+        ``steering_perturbation``, 0 in the other recordings; the validation and test
+        recordings are never perturbed (a model is tested on ordinary driving). None: no
+        experiment and no such column.
+    perturbed_share : float in [0, 1], default=1.0
+        The share of the training recordings perturbed, spread evenly over the settings
+        (``1/3`` of 12: the 3rd, 6th, 9th and 12th). A recording keeps its seeds whether it
+        is perturbed or not, and one that is not is the recording of the protocol without
+        ``perturbation``.
     n_jobs : int, default=None
         Recordings simulated in parallel (joblib); None means 1.
     cache : str, path or joblib.Memory, default=None
@@ -122,6 +154,7 @@ def make_driving_protocol(
         random_state=None,
         road_random_state=None,
     )
+    unperturbed = None if perturbation is None else 0.0
     if isinstance(drivers, str):
         drivers = (drivers,)
     drivers = tuple(drivers)
@@ -145,6 +178,7 @@ def make_driving_protocol(
     road_seeds = rng.randint(high, size=len(sections))
     driver_seeds = rng.randint(high, size=(len(drivers), len(sections)))
     run = human_run if cache is None else cached(cache)
+    perturbed = _perturbed(sections, perturbed_share)
     jobs = []
     for d, driver in enumerate(drivers):
         for k, (split, setting, i) in enumerate(sections):
@@ -153,6 +187,7 @@ def make_driving_protocol(
                 setting=setting,
                 random_state=int(driver_seeds[d, k]),
                 road_random_state=int(road_seeds[k]),
+                perturbation=template.perturbation if perturbed[k] else unperturbed,
             )
             jobs.append(delayed(run)(spec, driver, f"{driver}-{split}-s{setting}-{i}", split))
     return concat_frames(

@@ -25,12 +25,14 @@ from ..._core._schema import (
     RECORDING,
     SETTING,
     SPLIT,
+    STEERING_PERTURBATION,
     TARGET,
     TIME,
 )
 from .._frame import tidy_frame
 from ._closed_loop import LOG_COLUMNS, simulate
 from ._driver import check_driver, draw_remnants, sample_driver
+from ._perturbation import multisine, multisine_frequencies, perturbation_stream
 from ._road import SETTINGS, make_road, manoeuvre_of, manoeuvre_offsets
 from ._sensors import SENSOR_NOISE_LEVELS, check_sensor_noise
 from ._vehicle import VehicleParameters, check_vehicle
@@ -57,7 +59,8 @@ class SectionSpec:
     Built from a public function's arguments (:meth:`of`) and checked on construction, every
     error naming the argument (or the number of samples); frozen, so that what was checked is
     what is simulated. ``sensor_noise`` holds the scale of the sensor errors (``None``: the
-    true states) and ``vehicle`` the :class:`VehicleParameters`; the numbers are floats.
+    true states), ``vehicle`` the :class:`VehicleParameters` and ``perturbation`` the RMS of
+    the perturbation experiment (``None``: none); the numbers are floats.
     See :func:`make_lane_keeping` for their meaning.
     """
 
@@ -80,6 +83,10 @@ class SectionSpec:
         dict,
         VehicleParameters,
     )
+    perturbation: object = field(
+        default=None,
+        metadata={"constraints": [FiniteInterval(Real, 0, None, closed="left"), None]},
+    )
     caller: InitVar[str] = "SectionSpec"
 
     def __post_init__(self, caller):
@@ -93,7 +100,11 @@ class SectionSpec:
         object.__setattr__(self, "setting", int(self.setting))
         object.__setattr__(self, "sensor_noise", check_sensor_noise(self.sensor_noise))
         object.__setattr__(self, "vehicle", check_vehicle(self.vehicle))
+        if self.perturbation is not None:
+            object.__setattr__(self, "perturbation", float(self.perturbation))
         self._check_size()
+        if self.perturbation:  # the multisine's periods must fit in the section
+            multisine_frequencies(self.n_samples / self.sampling_rate)
 
     @classmethod
     def constraints(cls, *names):
@@ -195,10 +206,35 @@ class Section:
         self.remnants = draw_remnants(
             self.parameters, self.n_samples * self.n_sub, self.dt, self.rng
         )
+        # the perturbation experiment's torque at every integration step (None: none)
+        self.perturbation = None
+        if spec.perturbation:
+            self.perturbation = multisine(
+                spec.perturbation,
+                self.n_samples / self.sampling_rate,
+                self.dt,
+                self.n_samples * self.n_sub,
+                perturbation_stream(spec.random_state, rng),
+            )
 
     def simulate(self, torque_source=None, column_log=None):
         """The logged states of the closed loop over the section (see :func:`simulate`)."""
-        return simulate(self, self.n_samples, torque_source, column_log=column_log)
+        return simulate(
+            self,
+            self.n_samples,
+            torque_source,
+            column_log=column_log,
+            perturbation=self.perturbation,
+        )
+
+    def logged_perturbation(self, n_rows):
+        """The perturbation [Nm] at the first ``n_rows`` logged samples, or None when the
+        section has no perturbation experiment (``perturbation=0`` logs zeros)."""
+        if self.spec.perturbation is None:
+            return None
+        if self.perturbation is None:
+            return np.zeros(n_rows)
+        return self.perturbation[:: self.n_sub][:n_rows]
 
     def features(self, log):
         """The candidate features of Table B.2 (clean) and the torque of the logged states."""
@@ -242,6 +278,7 @@ class Section:
         """The tidy frame of the measured ``features`` and ``torque``, with the manoeuvre
         under way and its lane crossing, from the logged states ``log``."""
         manoeuvre, crossing = self.manoeuvres(log)
+        perturbation = self.logged_perturbation(len(torque))
         return tidy_frame(
             {
                 RECORDING: recording,
@@ -253,6 +290,7 @@ class Section:
                 CROSSING_TIME: crossing,
                 **features,
                 TARGET: torque,
+                **({} if perturbation is None else {STEERING_PERTURBATION: perturbation}),
             },
             attrs={
                 "scenario": self.spec.scenario,
