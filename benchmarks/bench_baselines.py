@@ -6,6 +6,9 @@ rate asked for, every model is fitted on the training recordings and scored on t
 recordings:
 
 - ``RidgeCV`` and ``HistGradientBoostingRegressor(max_iter=300)`` on the 18 features;
+- ordinary least squares on the 18 features plus the friction basis
+  ``tanh(steering_wheel_velocity / w)`` for w in 3, 6, 12, 25 and 50 mrad/s (``OLS + friction
+  basis``: the linear model a vehicle engineer writes by hand, issue #53);
 - gradient boosting with causal lags of the last second (every feature 0.1, 0.25, 0.5 and 1 s
   back, within its recording; the first rows repeat the first value);
 - ``HMMGMRRegressor`` with 5 and 8 states on the 18 features (the thesis' model);
@@ -21,7 +24,8 @@ predict throughput (rows/s on the test set) and per-sample streaming latency (me
 single-row calls: ``FilterStream.update`` for the HMM models, the pipeline's own stream of the
 sensed rows for the pipeline; ``predict`` on a one-row array for the others). Then the same
 accuracy and roughness per driver style, and the targets of the pipeline against the plain
-boosting baseline. Run with::
+boosting baseline and against the expert's linear model (mean and worst recording). Run
+with::
 
     python benchmarks/bench_baselines.py                      # seeds 0 1 2, 20 and 100 Hz
     python benchmarks/bench_baselines.py --seeds 0 --rates 20  # one table, about 2 minutes
@@ -50,7 +54,7 @@ import numpy as np
 import pandas as pd
 import sklearn
 from sklearn.ensemble import HistGradientBoostingRegressor
-from sklearn.linear_model import RidgeCV
+from sklearn.linear_model import LinearRegression, RidgeCV
 
 from skhmmgmr import HMMGMRRegressor, make_torque_pipeline
 from skhmmgmr.datasets import (
@@ -66,6 +70,9 @@ FEATURES = list(FEATURE_NAMES)
 LAGS_S = (0.1, 0.25, 0.5, 1.0)
 STYLES = ("defensive", "aggressive", "novice")
 PIPELINE = "make_torque_pipeline"
+EXPERT = "OLS + friction basis"
+#: The friction basis of the expert's linear model [rad/s] (issue #53).
+EXPERT_WIDTHS = (0.003, 0.006, 0.012, 0.025, 0.05)
 
 
 def add_lags(frame, rate):
@@ -78,6 +85,13 @@ def add_lags(frame, rate):
         shifted = by_recording.shift(steps).fillna(first)
         lagged.update({f"{c}_lag{lag}s": shifted[c] for c in FEATURES})
     return pd.concat([frame, pd.DataFrame(lagged, index=frame.index)], axis=1)
+
+
+def add_basis(frame):
+    """The expert's friction basis ``tanh(v / w)`` as columns ``friction_basis_<w>``."""
+    velocity = frame["steering_wheel_velocity"]
+    basis = {f"friction_basis_{w:g}": np.tanh(velocity / w) for w in EXPERT_WIDTHS}
+    return pd.concat([frame, pd.DataFrame(basis, index=frame.index)], axis=1)
 
 
 def score(y, pred, frame, rate):
@@ -170,11 +184,13 @@ def run(seed, rate, states, duration, cache, vehicle=None):
     pipeline = make_torque_pipeline(
         n_states=k, random_state=0, velocity_filter=velocity_filter, sampling_period=1.0 / rate
     )
-    lagged = add_lags(data, rate)
+    lagged = add_basis(add_lags(data, rate))
     train, test = lagged[lagged["split"] == "train"], lagged[lagged["split"] == "test"]
     lag_columns = [c for c in lagged.columns if "_lag" in c]
+    basis_columns = [c for c in lagged.columns if c.startswith("friction_basis_")]
     models = [
         ("RidgeCV", RidgeCV(), FEATURES, False),
+        (EXPERT, LinearRegression(), FEATURES + basis_columns, False),
         (
             "HistGradientBoosting",
             HistGradientBoostingRegressor(max_iter=300, random_state=0),
@@ -228,24 +244,44 @@ def summarise(table, costs):
 
 
 def targets(summary):
-    """The pipeline against plain boosting: mean, worst and roughness, overall and per style."""
+    """The pipeline against plain boosting (mean, worst and roughness, overall and per style)
+    and against the expert's linear model (mean and worst, overall)."""
     pipeline = next(m for m in summary.index if m.startswith(PIPELINE))
     ours, boost = summary.loc[pipeline], summary.loc["HistGradientBoosting"]
-    checks = []
+    expert = summary.loc[EXPERT]
+    checks = [
+        (
+            f"mean accuracy vs {EXPERT}",
+            ours["accuracy %"] >= expert["accuracy %"],
+            ours["accuracy %"],
+            expert["accuracy %"],
+        ),
+        (
+            f"worst recording vs {EXPERT}",
+            ours["worst %"] >= expert["worst %"],
+            ours["worst %"],
+            expert["worst %"],
+        ),
+    ]
     for prefix in ("", *[f"{s[:3]} " for s in STYLES]):
         acc = "accuracy %" if not prefix else f"{prefix}acc"
         worst = "worst %" if not prefix else f"{prefix}worst"
         rough = "roughness Nm/s" if not prefix else f"{prefix}rough"
         checks += [
-            (f"{prefix or 'all '}mean accuracy", ours[acc] >= boost[acc], ours[acc], boost[acc]),
             (
-                f"{prefix or 'all '}worst recording",
+                f"{prefix or 'all '}mean accuracy vs boosting",
+                ours[acc] >= boost[acc],
+                ours[acc],
+                boost[acc],
+            ),
+            (
+                f"{prefix or 'all '}worst recording vs boosting",
                 ours[worst] >= boost[worst],
                 ours[worst],
                 boost[worst],
             ),
             (
-                f"{prefix or 'all '}roughness",
+                f"{prefix or 'all '}roughness vs boosting",
                 ours[rough] <= boost[rough],
                 ours[rough],
                 boost[rough],
@@ -373,11 +409,9 @@ def main():
             for seed in args.seeds:
                 table, summary = run(seed, rate, args.states, duration, args.cache, vehicle)
                 tables.append(table)
-                for what, ok, ours, boost in targets(summary):
+                for what, ok, ours, theirs in targets(summary):
                     missed += not ok
-                    print(
-                        f"  [{'ok' if ok else 'MISSED'}] {what}: {ours:.2f} vs boosting {boost:.2f}"
-                    )
+                    print(f"  [{'ok' if ok else 'MISSED'}] {what}: {ours:.2f} vs {theirs:.2f}")
     if len(vehicles) > 1:
         spread(pd.concat(tables, ignore_index=True))
     if args.output:

@@ -89,7 +89,14 @@ steps in order, each an object with ``name`` (the step's name in the pipeline) a
   ``feature_names_in`` (the input columns, or null when fitted on an array). The step
   appends to its inputs, in this order:
   ``steering_friction = tanh(v / friction_velocity)`` (unless ``friction_velocity`` is null)
-  with ``v`` the column ``friction_column``, and for every column ``x`` of ``load_columns``
+  with ``v`` the column ``friction_column`` (for an array of widths ``w_j``, a basis: one
+  input ``steering_friction_<w_j> = tanh(v / w_j)`` per width, in the array's order, named by
+  ``w_j`` to three significant digits), then (with ``friction_angle``, an array of
+  half-widths ``r_j``: a key written only with them, with ``angle_column`` the angle's
+  column) one input ``steering_hysteresis_<r_j> = (a - p_j) / r_j`` per half-width, ``a`` the
+  angle and ``p_j`` its play ``p_t = min(max(p_(t-1), a_t - r_j), a_t + r_j)``, restarted at
+  every recording at its first observed angle (a missing angle leaves it alone), and for
+  every column ``x`` of ``load_columns``
   and every ``p`` of ``powers`` ``sign(x) |x|^p`` (named ``<x>_signed_square``, ``<x>_cube``,
   ``<x>_signed_power<p>``; columns are names, or positions when ``feature_names_in`` is
   null). With ``velocity_filter`` ``tau``, ``v`` is

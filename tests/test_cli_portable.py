@@ -9,7 +9,7 @@ from skhmmgmr import HMMGMRRegressor, portable
 from skhmmgmr.cli import main
 from skhmmgmr.datasets import make_lane_keeping
 from skhmmgmr.metrics import evaluate_recordings
-from skhmmgmr.torque_pipeline import FRICTION_CANDIDATES, TorquePipeline
+from skhmmgmr.torque_pipeline import WIDTH_GRID, TorquePipeline
 
 pytest.importorskip("pyarrow")
 
@@ -36,7 +36,8 @@ def files(tmp_path_factory):
     data.to_csv(csv, index=False)
     data.to_parquet(parquet)
     model = folder / "pipe.json"
-    argv = [*FIT, "--pipeline", "torque", "--velocity-filter", "0.1", "--output", str(model)]
+    argv = [*FIT, "--pipeline", "torque", "--velocity-filter", "0.1", "--friction-angle", "none"]
+    argv += ["--output", str(model)]
     argv.insert(1, str(parquet))
     assert main(["--quiet", *argv]) == 0
     return dict(data=data, csv=csv, parquet=parquet, model=model, folder=folder)
@@ -46,8 +47,11 @@ def test_fit_writes_the_torque_pipeline_with_its_options(files):
     pipe, training = portable.load(files["model"], return_training=True)
     assert type(pipe) is TorquePipeline
     features = pipe[0]
-    # the friction band is chosen in fit (the default "auto"); the file holds the chosen one
-    assert features.velocity_filter == 0.1 and features.friction_velocity in FRICTION_CANDIDATES
+    # the friction inputs are chosen in fit (the default "auto"); the file holds the chosen
+    # widths, a run of the grid's
+    assert features.velocity_filter == 0.1 and isinstance(features.friction_velocity, tuple)
+    first = WIDTH_GRID.index(features.friction_velocity[0])
+    assert features.friction_velocity == WIDTH_GRID[first : first + len(features.friction_velocity)]
     assert features.sampling_period == pytest.approx(0.05, rel=1e-12)
     assert training["sampling_period"] == features.sampling_period
     assert training["longest_recording"] == 300

@@ -197,3 +197,49 @@ def test_a_missing_fmpy_skips_the_fmu_with_a_line(monkeypatch, tmp_path):
         "The FMUs are not written: FMPy is not installed (pip install 'skhmmgmr[fmu]')."
     ]
     assert not list(tmp_path.glob("*.fmu"))
+
+
+def test_the_driver_model_is_fitted_on_the_perturbation_experiment(demo_dir, test_rows):
+    # by hand: the demo's training sections, a third of them driven again with a 0.2 Nm RMS
+    # perturbation, and make_driver_model's defaults fitted on them
+    from skhmmgmr import make_driver_model
+    from skhmmgmr.datasets import DRIVER_MODEL_FEATURES
+
+    experiment = make_driving_protocol(
+        drivers=("defensive", "novice"),
+        duration=6.0,
+        sampling_rate=10.0,
+        random_state=0,
+        n_validation=0,
+        n_test=0,
+        perturbation=0.2,
+        perturbed_share=1 / 3,
+    ).sort_values(["recording", "time"], kind="stable")
+    perturbed = experiment.groupby("recording")["steering_perturbation"].apply(
+        lambda p: bool(p.abs().max() > 0)
+    )
+    assert perturbed.sum() * 3 == perturbed.size  # a third of the training recordings
+    features = list(DRIVER_MODEL_FEATURES)
+    by_hand = make_driver_model(sampling_period=0.1, random_state=0).fit(
+        experiment[features],
+        experiment["driver_torque"],
+        groups=experiment["recording"],
+        perturbation=experiment["steering_perturbation"],
+    )
+    saved = portable.load(demo_dir / "driver_model.json")
+    assert type(saved).__name__ == "DriverModel"
+    assert saved.perturbed_share_ == pytest.approx(1 / 3, rel=1e-12)
+    rows = experiment["recording"].map(perturbed).to_numpy()
+    rms = np.sqrt(np.mean(experiment["steering_perturbation"].to_numpy()[rows] ** 2))
+    assert saved.perturbation_rms_ == pytest.approx(rms, rel=1e-12)
+    assert rms == pytest.approx(0.2, rel=0.01)  # the multisine's RMS over 6-s sections
+    groups = test_rows["recording"]
+    np.testing.assert_allclose(
+        saved.predict(test_rows[features], groups=groups),
+        by_hand.predict(test_rows[features], groups=groups),
+        rtol=1e-9,
+        atol=1e-9,
+    )
+    # and the page says what it was fitted on
+    use = pd.read_csv(demo_dir / "models.csv").set_index("model").loc["driver_model", "use"]
+    assert "perturbation" in use and "0.2 Nm" in use

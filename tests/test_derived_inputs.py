@@ -1,29 +1,44 @@
 """The derived inputs chosen by the data: ``friction_velocity="auto"`` and
 ``velocity_filter="auto"`` of :class:`SteeringFeatures` (the defaults of
-``make_torque_pipeline``), and the chosen values in the stream, the model file, the C filter
-and the command line."""
+``make_torque_pipeline``), the friction basis (#53), and the chosen values in the stream, the
+model file, the C filter and the command line."""
 
 import json
 import math
+import re
 import shutil
+import subprocess
 
 import numpy as np
 import pandas as pd
 import pytest
 import sklearn
+from test_pipeline_stream import _plain_play
 
 from skhmmgmr import SteeringFeatures, make_torque_pipeline, portable
-from skhmmgmr.datasets import to_panel
-from skhmmgmr.torque_pipeline import FILTER_CANDIDATES, FRICTION_CANDIDATES, low_pass
+from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping, to_panel
+from skhmmgmr.torque_pipeline import FILTER_CANDIDATES, WIDTH_GRID, low_pass
+from skhmmgmr.torque_pipeline._friction_search import LADDER_QUANTILES, velocity_ladder
 
 COLUMNS = ["steering_wheel_angle", "steering_wheel_velocity", "lateral_acceleration"]
 PERIOD = 0.01
 BAND = 0.05  # the friction band of the data
 
 
-def _recordings(n_recordings=6, seconds=20.0, noise=0.06, seed=0):
-    """Smooth steering with a friction torque of band ``BAND``, the velocity measured with
-    white noise: the torque reads the true velocity, the inputs the measured one."""
+def _recordings(
+    friction=((0.4, BAND),),
+    n_recordings=6,
+    seconds=20.0,
+    noise=0.06,
+    seed=0,
+    plays=(),
+    angle_noise=1e-3,
+):
+    """Smooth steering with a friction torque ``sum(h * tanh(v / w))`` over the ``(h, w)`` of
+    ``friction`` and a hysteresis torque ``sum(h * play_r(angle))`` over the ``(h, r)`` of
+    ``plays``, the velocity measured with white noise of std ``noise``, the angle with
+    ``angle_noise``: the torque reads the true velocity and angle, the inputs the measured
+    ones."""
     rng = np.random.default_rng(seed)
     frames = []
     t = np.arange(0.0, seconds, PERIOD)
@@ -39,12 +54,14 @@ def _recordings(n_recordings=6, seconds=20.0, noise=0.06, seed=0):
             a * 2 * np.pi * f * np.cos(2 * np.pi * f * t + p)
             for a, f, p in zip(amplitudes, frequencies, phases, strict=True)
         )
-        torque = 8.0 * angle + 0.4 * np.tanh(velocity / BAND) + rng.normal(0, 0.01, len(t))
+        torque = 8.0 * angle + rng.normal(0, 0.01, len(t))
+        torque += sum(height * np.tanh(velocity / width) for height, width in friction)
+        torque += sum(height * _plain_play(angle, radius) for height, radius in plays)
         frames.append(
             pd.DataFrame(
                 {
                     "recording": f"r{number}",
-                    "steering_wheel_angle": angle + rng.normal(0, 1e-3, len(t)),
+                    "steering_wheel_angle": angle + rng.normal(0, angle_noise, len(t)),
                     "steering_wheel_velocity": velocity + rng.normal(0, noise, len(t)),
                     "lateral_acceleration": 60.0 * angle + rng.normal(0, 0.5, len(t)),
                     "driver_torque": torque,
@@ -63,22 +80,26 @@ def _auto(**params):
     return SteeringFeatures(friction_velocity="auto", velocity_filter="auto", **params)
 
 
-def _plain_rmse(data, band, time_constant):
+def _filtered(velocity, groups, time_constant):
+    """The velocity through the filter, recording by recording (``low_pass``)."""
+    if time_constant is None:
+        return velocity
+    decay = math.exp(-PERIOD / time_constant)
+    return np.concatenate([low_pass(velocity[groups == g], decay) for g in pd.unique(groups)])
+
+
+def _plain_rmse(data, widths, time_constant):
     """The held-out RMSE of one candidate by a plain loop: every third recording held out in
-    turn, least squares (``numpy.linalg.lstsq``) on the inputs and the derived inputs."""
+    turn, least squares (``numpy.linalg.lstsq``) on the inputs, the load inputs and the
+    friction basis ``tanh(v / w)`` of ``widths`` (none for None)."""
     groups = data["recording"].to_numpy()
     y = data["driver_torque"].to_numpy()
     derived = SteeringFeatures(friction_velocity=None).fit_transform(data[COLUMNS]).to_numpy()
-    velocity = data["steering_wheel_velocity"].to_numpy()
-    if time_constant is not None:
-        decay = math.exp(-PERIOD / time_constant)
-        velocity = np.concatenate(
-            [low_pass(velocity[groups == g], decay) for g in pd.unique(groups)]
-        )
-    inputs = np.column_stack([derived, np.tanh(velocity / band)])
+    velocity = _filtered(data["steering_wheel_velocity"].to_numpy(), groups, time_constant)
+    basis = [np.tanh(velocity / width) for width in widths or ()]
+    inputs = np.column_stack([np.ones(len(y)), derived, *basis])
     fold = {g: i % 3 for i, g in enumerate(pd.unique(groups))}
     folds = np.array([fold[g] for g in groups])
-    inputs = np.column_stack([np.ones(len(y)), inputs])
     squares = 0.0
     for k in range(3):
         held = folds == k
@@ -87,49 +108,252 @@ def _plain_rmse(data, band, time_constant):
     return math.sqrt(squares / len(y))
 
 
-def test_auto_chooses_the_band_and_a_velocity_filter_on_noisy_velocities(data):
+def _choice(friction, noise):
+    data = _recordings(friction, noise=noise)
+    step = _auto(sampling_period=PERIOD)
+    return step.fit(data[COLUMNS], data["driver_torque"], groups=data["recording"])
+
+
+@pytest.mark.parametrize(
+    "friction, widths",
+    [
+        (((0.4, 0.05),), (0.05,)),  # one band of the grid: that band alone
+        (((0.4, 0.2),), (0.2,)),
+        ((), None),  # no friction: no friction input
+    ],
+)
+def test_auto_finds_a_known_band_and_no_friction_where_there_is_none(friction, widths):
+    """Clean velocities (noise 1 mrad/s): the friction the torque holds is the answer."""
+    step = _choice(friction, noise=0.001)
+    assert step.friction_velocity_ == widths
+    if widths is None:
+        assert step.velocity_filter_ is None
+        assert not any(n.startswith("steering_friction") for n in step.get_feature_names_out())
+
+
+@pytest.mark.parametrize(
+    "friction, plays, widths, radii",
+    [
+        ((), ((0.4, 0.004),), None, (0.004,)),  # a play alone: that play
+        (((0.3, 0.05),), ((0.3, 0.004),), (0.05,), (0.004,)),  # both
+        (((0.4, 0.05),), (), (0.05,), None),  # a band alone: no play
+        ((), (), None, None),  # neither
+    ],
+)
+def test_auto_finds_a_known_play_beside_the_band(friction, plays, widths, radii):
+    """Exact angles, clean velocities: the hysteresis the torque holds (a play of half-width
+    4 mrad on the angle) is found with the friction band, or not at all where there is none."""
+    data = _recordings(friction, plays=plays, noise=0.001, angle_noise=0.0)
+    step = _auto(sampling_period=PERIOD, friction_angle="auto")
+    step.fit(data[COLUMNS], data["driver_torque"], groups=data["recording"])
+    assert (step.friction_velocity_, step.friction_angle_) == (widths, radii)
+    names = list(step.get_feature_names_out())
+    assert ("steering_hysteresis_0.004" in names) == (radii is not None)
+
+
+def test_sharp_friction_gets_narrow_widths_and_two_bands_a_basis():
+    """A band of 5 mrad/s, below the grid's 6.25: a basis from the narrowest width the
+    velocity resolves; a friction curve of two bands (5 and 100 mrad/s): a basis spanning
+    both, more accurate than any single band."""
+    sharp = _choice(((0.4, 0.005),), noise=0.001)
+    widths = sharp.friction_velocity_
+    velocity_resolved = velocity_ladder(_recordings(((0.4, 0.005),), noise=0.001)[COLUMNS[1]])
+    assert widths[0] == velocity_resolved[0] <= 0.00625 and len(widths) >= 2
+    assert widths == WIDTH_GRID[WIDTH_GRID.index(widths[0]) :][: len(widths)]  # consecutive
+    double = _choice(((0.2, 0.005), (0.2, 0.1)), noise=0.001)
+    widths = double.friction_velocity_
+    assert widths[0] <= 0.00625 and widths[-1] >= 0.1
+    table = double.friction_search_
+    single = table[table["n_friction_inputs"] == 1]["validation_rmse"].min()
+    assert table[table["chosen"]]["validation_rmse"].iloc[0] < 0.5 * single
+
+
+def _simulated(vehicle, sensor_noise="typical"):
+    """Six 40-second recordings of the simulator at 50 Hz (three driver styles) in the
+    reference car with ``vehicle``'s parameters, the friction inputs chosen on them."""
+    frames = [
+        make_lane_keeping(
+            40.0,
+            driver=style,
+            sampling_rate=50.0,
+            random_state=seed,
+            vehicle=vehicle,
+            sensor_noise=sensor_noise,
+            recording=f"{style}-{seed}",
+        )
+        for seed, style in enumerate(["defensive", "aggressive", "novice"] * 2)
+    ]
+    data = pd.concat(frames, ignore_index=True)
+    step = SteeringFeatures(friction_velocity="auto")
+    step.fit(data[list(FEATURE_NAMES)], data["driver_torque"], groups=data["recording"])
+    return step.friction_velocity_
+
+
+def test_a_simulated_car_gets_the_widths_of_its_friction():
+    """The simulator's column: a sharp band (3 mrad/s) gets a basis from a narrow width, a
+    smooth one (0.3 rad/s) wide bands only, a column without friction no friction input. With
+    the sensors' true values the narrowest width is the band's; measured (the angle in steps of
+    0.1 deg: 87 mrad/s at 50 Hz), the velocity resolves less, and the sharp band's narrowest
+    width is still a sixteenth of the smooth one's at most."""
+    sharp = _simulated({"friction_velocity": 0.003}, sensor_noise=None)
+    smooth = _simulated({"friction_velocity": 0.3}, sensor_noise=None)
+    assert sharp[0] <= 0.0032 and min(smooth) >= 0.025
+    sharp = _simulated({"friction_velocity": 0.003})
+    smooth = _simulated({"friction_velocity": 0.3})
+    assert sharp[0] <= smooth[0] / 16
+    assert _simulated({"wheel_friction": 0.0}) is None
+
+
+def test_the_ladder_reads_the_velocitys_scale_through_each_filter():
+    """The ladder of every filter candidate runs from the narrowest band whose transition
+    ``|v| < 2 w`` holds the low quantile of the (filtered) velocity's sizes to the widest at
+    most its high quantile; on a velocity noisier than the steering (0.5 rad/s), the filter,
+    which takes noise out, lets narrower bands in."""
+    data = _recordings(noise=0.5)
     step = _auto(sampling_period=PERIOD)
     step.fit(data[COLUMNS], data["driver_torque"], groups=data["recording"])
     table = step.friction_search_
-    assert len(table) == len(FRICTION_CANDIDATES) * len(FILTER_CANDIDATES)
-    assert table["chosen"].sum() == 1
-    chosen = table[table["chosen"]].iloc[0]
-    assert chosen["validation_rmse"] == table["validation_rmse"].min()
-    assert step.friction_velocity_ == chosen["friction_velocity"] == BAND
-    # the measured velocity is noisy at the scale of the band: a filter helps
-    assert step.velocity_filter_ in FILTER_CANDIDATES and step.velocity_filter_ is not None
-    # the transform uses the chosen values
-    out = step.transform(data[COLUMNS], groups=data["recording"])
-    fixed = SteeringFeatures(
-        friction_velocity=BAND, velocity_filter=step.velocity_filter_, sampling_period=PERIOD
-    ).fit_transform(data[COLUMNS], groups=data["recording"])
-    pd.testing.assert_frame_equal(out, fixed)
+    groups = data["recording"].to_numpy()
+    ladders = {}
+    for time_constant in FILTER_CANDIDATES:
+        velocity = _filtered(data[COLUMNS[1]].to_numpy(), groups, time_constant)
+        size = np.abs(velocity[velocity != 0])
+        low, high = np.quantile(size, LADDER_QUANTILES)
+        expected = tuple(w for w in WIDTH_GRID if 2 * w >= low and w <= high)
+        rows = table[table["velocity_filter"].map(lambda v, tc=time_constant: v == tc)]
+        longest = max((w for w in rows["friction_velocity"] if w is not None), key=len)
+        assert longest == expected
+        # every window of consecutive widths, and no friction input
+        n = len(expected)
+        assert len(rows) == 1 + n * (n + 1) // 2
+        ladders[time_constant] = expected
+    assert ladders[0.05][0] < ladders[None][0]
 
 
-@pytest.mark.parametrize("band, time_constant", [(0.025, None), (0.05, 0.02), (0.4, 0.05)])
-def test_the_validation_rmse_is_that_of_a_plain_loop(data, band, time_constant):
+def test_the_basis_is_the_hand_built_design_matrix(data):
+    """A basis of widths (the issue's 3 to 50 mrad/s) is the columns ``numpy.tanh(v / w)``,
+    with the velocity filter a plain loop's, then the load inputs; named by their widths,
+    unit 1."""
+    widths = (0.003, 0.006, 0.012, 0.025, 0.05)
+    X, groups = data[COLUMNS], data["recording"].to_numpy()
+    X = X.copy()
+    X.attrs["units"] = {"steering_wheel_velocity": "rad/s"}
+    for time_constant in (None, 0.02):
+        step = SteeringFeatures(
+            friction_velocity=widths, velocity_filter=time_constant, sampling_period=PERIOD
+        )
+        out = step.fit_transform(X, groups=groups)
+        velocity = X[COLUMNS[1]].to_numpy()
+        if time_constant is not None:
+            velocity = np.concatenate(
+                [
+                    _plain_filter(velocity[groups == g], math.exp(-PERIOD / time_constant))
+                    for g in pd.unique(groups)
+                ]
+            )
+        angle, acceleration = X[COLUMNS[0]].to_numpy(), X[COLUMNS[2]].to_numpy()
+        expected = np.column_stack(
+            [
+                X.to_numpy(),
+                *[np.tanh(velocity / w) for w in widths],
+                angle * np.abs(angle),
+                angle**3,
+                acceleration * np.abs(acceleration),
+                acceleration**3,
+            ]
+        )
+        np.testing.assert_allclose(out.to_numpy(), expected, rtol=1e-12, atol=0)
+        names = ["0.003", "0.006", "0.012", "0.025", "0.05"]
+        assert list(out.columns[3:8]) == [f"steering_friction_{n}" for n in names]
+        assert all(out.attrs["units"][name] == "1" for name in out.columns[3:8])
+    # a list is a basis too; an array in, an array out, the same numbers
+    array = SteeringFeatures(friction_velocity=list(widths), friction_column=1, load_columns=(0, 2))
+    named = SteeringFeatures(friction_velocity=widths).fit_transform(X)
+    np.testing.assert_array_equal(array.fit_transform(X.to_numpy()), named.to_numpy())
+    assert array.friction_velocity_ == widths
+
+
+def _plain_filter(values, decay):
+    out, state = [], None
+    for value in values:
+        state = value if state is None else decay * state + (1.0 - decay) * value
+        out.append(state)
+    return np.array(out)
+
+
+@pytest.mark.parametrize(
+    "widths, message",
+    [
+        ((), "holds no width"),
+        ((0.01, -0.02), "widths > 0"),
+        ((0.01, float("nan")), "widths > 0"),
+        ((0.01, True), "widths > 0"),
+        ((0.01, 0.0100001), "repeats a width"),
+    ],
+)
+def test_a_bad_basis_is_refused_naming_it(data, widths, message):
+    with pytest.raises(ValueError, match=message):
+        SteeringFeatures(friction_velocity=widths).fit(data[COLUMNS])
+
+
+@pytest.mark.parametrize(
+    "widths, time_constant", [(None, None), ((0.025,), None), ((0.05, 0.1), 0.02)]
+)
+def test_the_validation_rmse_is_that_of_a_plain_loop(data, widths, time_constant):
     step = _auto(sampling_period=PERIOD)
     step.fit(data[COLUMNS], data["driver_torque"], groups=data["recording"])
     table = step.friction_search_
     row = table[
-        (table["friction_velocity"] == band)
+        (table["friction_velocity"].map(lambda w: w == widths))
         & table["velocity_filter"].map(lambda v: v == time_constant)
     ]
     assert len(row) == 1
-    expected = _plain_rmse(data, band, time_constant)
+    expected = _plain_rmse(data, widths, time_constant)
     assert row["validation_rmse"].iloc[0] == pytest.approx(expected, rel=1e-7)
+
+
+def test_the_rule_takes_the_fewest_inputs_near_the_least_error(data):
+    step = _auto(sampling_period=PERIOD)
+    step.fit(data[COLUMNS], data["driver_torque"], groups=data["recording"])
+    table = step.friction_search_
+    assert table["chosen"].sum() == 1
+    chosen = table[table["chosen"]].iloc[0]
+    least = table["validation_rmse"].min()
+    assert chosen["validation_rmse"] <= least * 1.002
+    fewer = table[table["n_friction_inputs"] < chosen["n_friction_inputs"]]
+    assert (fewer["validation_rmse"] > least * 1.002).all()
+    assert step.friction_velocity_ == chosen["friction_velocity"]
+    assert step.velocity_filter_ == chosen["velocity_filter"]
+    # the transform uses the chosen values
+    out = step.transform(data[COLUMNS], groups=data["recording"])
+    fixed = SteeringFeatures(
+        friction_velocity=step.friction_velocity_,
+        velocity_filter=step.velocity_filter_,
+        sampling_period=PERIOD,
+    ).fit_transform(data[COLUMNS], groups=data["recording"])
+    pd.testing.assert_frame_equal(out, fixed)
 
 
 def test_the_candidates_follow_the_settings(data):
     X, y, groups = data[COLUMNS], data["driver_torque"], data["recording"]
     # no sampling period: no filter to compare
     step = _auto().fit(X, y, groups=groups)
-    assert list(step.friction_search_["velocity_filter"]) == [None] * len(FRICTION_CANDIDATES)
+    assert set(step.friction_search_["velocity_filter"]) == {None}
     assert step.velocity_filter_ is None
-    # a fixed band: the filters only
+    # a fixed band: the filters only, the band kept as it is
     step = SteeringFeatures(velocity_filter="auto", sampling_period=PERIOD).fit(X, y, groups=groups)
     assert list(step.friction_search_["friction_velocity"]) == [0.1] * len(FILTER_CANDIDATES)
     assert step.friction_velocity_ == 0.1
+    assert "steering_friction" in step.get_feature_names_out()
+    # a fixed basis: the filters only
+    step = SteeringFeatures(
+        friction_velocity=(0.05, 0.1), velocity_filter="auto", sampling_period=PERIOD
+    )
+    step.fit(X, y, groups=groups)
+    assert list(step.friction_search_["friction_velocity"]) == [(0.05, 0.1)] * len(
+        FILTER_CANDIDATES
+    )
+    assert step.friction_velocity_ == (0.05, 0.1)
     # no friction input: nothing to choose
     step = SteeringFeatures(friction_velocity=None, velocity_filter="auto").fit(X)
     assert step.friction_search_ is None and step.velocity_filter_ is None
@@ -146,9 +370,12 @@ def test_one_recording_is_cut_in_consecutive_folds(data):
     step = SteeringFeatures(friction_velocity="auto").fit(X, y)
     blocks = pd.Series(np.repeat(["b0", "b1", "b2"], 1000))
     frame = pd.concat([X, y], axis=1).assign(recording=blocks.to_numpy())
-    for band in (0.025, 0.1):
-        got = step.friction_search_.set_index("friction_velocity")["validation_rmse"][band]
-        assert got == pytest.approx(_plain_rmse(frame, band, None), rel=1e-7)
+    table = step.friction_search_
+    for widths in (None, (0.025,), (0.025, 0.05, 0.1)):
+        got = table[table["friction_velocity"].map(lambda w, ws=widths: w == ws)]
+        assert len(got) == 1
+        expected = _plain_rmse(frame, widths, None)
+        assert got["validation_rmse"].iloc[0] == pytest.approx(expected, rel=1e-7)
 
 
 def test_auto_needs_the_target(data):
@@ -171,17 +398,21 @@ def test_the_choice_is_deterministic_and_ignores_the_row_order_in_the_pipeline(d
 
 @pytest.fixture(scope="module")
 def pipeline(data):
-    """The torque pipeline with its defaults: the band and the filter chosen in fit."""
+    """The torque pipeline with its defaults: the friction basis and the filter chosen in
+    fit."""
     model = make_torque_pipeline(3, sampling_period=PERIOD, n_iter=10, random_state=0)
     model.fit(data[COLUMNS], data["driver_torque"], groups=data["recording"])
     assert model[0].velocity_filter_ is not None  # the stream must follow a chosen filter
+    assert len(model[0].friction_velocity_) >= 2  # a basis
+    assert model[0].friction_angle_ is not None  # and plays
     return model
 
 
 def test_the_stream_follows_the_chosen_settings(pipeline, data):
     X, groups = data[COLUMNS], data["recording"].to_numpy()
     settings = pipeline[0].stream_settings()
-    assert settings["friction_velocity"] == pipeline[0].friction_velocity_
+    assert settings["friction_velocity"] == list(pipeline[0].friction_velocity_)
+    assert settings["friction_angle"] == list(pipeline[0].friction_angle_)
     assert settings["filter_decay"] == math.exp(-PERIOD / pipeline[0].velocity_filter_)
     stream = pipeline.filter_stream()
     estimates = []
@@ -195,33 +426,96 @@ def test_the_stream_follows_the_chosen_settings(pipeline, data):
 def test_the_model_file_holds_the_chosen_values(pipeline, data, tmp_path):
     path = tmp_path / "pipe.json"
     portable.save(pipeline, path, output_names=["driver_torque"])
-    params = json.loads(path.read_text())["steps"][0]["params"]
-    assert params["friction_velocity"] == pipeline[0].friction_velocity_
+    document = json.loads(path.read_text())
+    params = document["steps"][0]["params"]
+    assert params["friction_velocity"] == list(pipeline[0].friction_velocity_)
+    assert params["friction_angle"] == list(pipeline[0].friction_angle_)
+    assert params["angle_column"] == "steering_wheel_angle"
     assert params["velocity_filter"] == pipeline[0].velocity_filter_
+    # a basis needs no new format version (older readers refuse it, never misread it)
+    assert document["format_version"] == document["steps"][-1]["model"]["format_version"]
     restored = portable.load(path)
     assert restored[0].friction_velocity_ == pipeline[0].friction_velocity_
+    assert restored[0].friction_angle_ == pipeline[0].friction_angle_
     X, groups = data[COLUMNS], data["recording"]
     np.testing.assert_array_equal(
         restored.predict(X, groups=groups), pipeline.predict(X, groups=groups)
     )
-    # a file cannot hold a setting still to choose
-    document = json.loads(path.read_text())
+    np.testing.assert_array_equal(
+        restored[0].transform(X, groups=groups), pipeline[0].transform(X, groups=groups)
+    )
+    # a file cannot hold a setting still to choose, nor a basis fit would refuse
+    velocity, angle = "friction_velocity", "friction_angle"
+    for key, value, message in [
+        (
+            velocity,
+            "auto",
+            "'steps[0].params.friction_velocity' must be a number or null or a list",
+        ),
+        (velocity, [0.01, -1.0], "'steps[0].params.friction_velocity[1]' must be greater than 0"),
+        (velocity, [], "'steps[0].params.friction_velocity' must be a non-empty list"),
+        (velocity, [0.01, 0.01], "'steps[0].params.friction_velocity' holds [0.01] more than once"),
+        (velocity, [0.01, 0.0100001], "repeats a width"),
+        (angle, "auto", "'steps[0].params.friction_angle' must be a list"),
+        (angle, 0.004, "'steps[0].params.friction_angle' must be a list"),
+        (angle, [0.004, 0.0], "'steps[0].params.friction_angle[1]' must be greater than 0"),
+        (angle, [0.004, 0.0040001], "friction_angle=(0.004, 0.0040001) repeats a width"),
+    ]:
+        bad = json.loads(json.dumps(document))
+        bad["steps"][0]["params"][key] = value
+        path.write_text(json.dumps(bad))
+        with pytest.raises(ValueError, match=re.escape(message)):
+            portable.load(path)
     document["steps"][0]["params"]["velocity_filter"] = "auto"
     path.write_text(json.dumps(document))
     with pytest.raises(ValueError, match="'steps.0..params.velocity_filter' must be a number or"):
         portable.load(path)
 
 
+def test_a_step_without_plays_writes_the_keys_of_before(data, tmp_path):
+    """The keys of the hysteresis inputs are written only with them: the file of a step
+    without them is one an older reader reads."""
+    X, y, groups = data[COLUMNS], data["driver_torque"], data["recording"]
+    pipeline = make_torque_pipeline(1, friction_angle=None, velocity_filter=None)
+    portable.save(pipeline.fit(X, y, groups=groups), tmp_path / "pipe.json")
+    params = json.loads((tmp_path / "pipe.json").read_text())["steps"][0]["params"]
+    old = ["friction_velocity", "friction_column", "load_columns", "powers", "velocity_filter"]
+    assert list(params) == [*old, "sampling_period"]
+    assert portable.load(tmp_path / "pipe.json")[0].friction_angle_ is None
+
+
 @pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler (cc) on this machine")
 def test_the_c_filter_follows_the_chosen_settings(pipeline, data, tmp_path):
-    from test_export_c import Compiled, _close
+    """Double precision to 1e-12 of predict; single precision throughout (built with
+    -Wdouble-promotion -Werror, no double-precision libm function) within the C tests'
+    float tolerance."""
+    from test_export_c import (
+        CC,
+        DOUBLE_LIBM,
+        FLOAT32_FLAGS,
+        FLOAT32_RTOL,
+        Compiled,
+        _close,
+        _undefined_symbols,
+    )
 
-    compiled = Compiled(pipeline, tmp_path, name="auto")
     X, groups = data[COLUMNS], data["recording"]
+    expected = pipeline.predict(X, groups=groups)
+    scale = pipeline[-1].model_.standardization.output_scale
+    compiled = Compiled(pipeline, tmp_path, name="auto")
+    assert "friction_widths" in compiled.paths[1].read_text()
     estimates, _, codes = compiled.run(X, groups)
     assert not codes.any()
-    scale = pipeline[-1].model_.standardization.output_scale
-    _close(estimates[:, 0], pipeline.predict(X, groups=groups), scale)
+    np.testing.assert_allclose(estimates[:, 0], expected, rtol=0, atol=1e-12)
+    single = Compiled(pipeline, tmp_path, name="single", dtype="float32")
+    estimates, _, codes = single.run(X, groups)
+    assert not codes.any()
+    _close(estimates[:, 0], expected, scale, FLOAT32_RTOL)
+    obj = tmp_path / "single.o"
+    build = [CC, *FLOAT32_FLAGS, "-c", str(single.paths[1]), "-o", str(obj)]
+    subprocess.run(build, check=True, capture_output=True)
+    undefined = _undefined_symbols("nm", obj)
+    assert not undefined & DOUBLE_LIBM and "tanhf" in undefined, undefined
 
 
 def test_the_command_line_chooses_and_reports_the_settings(data, tmp_path, capsys):
@@ -235,10 +529,11 @@ def test_the_command_line_chooses_and_reports_the_settings(data, tmp_path, capsy
     argv += ["--friction-velocity", "auto", "--velocity-filter", "auto"]
     assert main(argv) == 0
     fitted = portable.load(model)
-    band, time_constant = fitted[0].friction_velocity, fitted[0].velocity_filter
-    assert band in FRICTION_CANDIDATES and time_constant in FILTER_CANDIDATES
+    widths, time_constant = fitted[0].friction_velocity, fitted[0].velocity_filter
+    assert set(widths) <= set(WIDTH_GRID) and time_constant in FILTER_CANDIDATES
     assert fitted[0].sampling_period == pytest.approx(2 * PERIOD)
-    assert f"friction_velocity {band:g}" in capsys.readouterr().out
+    listed = ", ".join(f"{w:g}" for w in widths)
+    assert f"friction_velocity {listed}, velocity_filter" in capsys.readouterr().out
 
 
 def test_the_recordings_reach_the_choice_by_every_path(data):
@@ -272,7 +567,7 @@ def test_the_sampling_period_is_read_from_a_panels_time_index(data):
     considered = set(pipe[0].friction_search_["velocity_filter"])
     assert considered == set(FILTER_CANDIDATES)
     # the same choice as with the period given, and a fixed filter needs no more
-    given = _auto(sampling_period=PERIOD).fit(X, y)
+    given = _auto(sampling_period=PERIOD, friction_angle="auto").fit(X, y)
     pd.testing.assert_frame_equal(pipe[0].friction_search_, given.friction_search_)
     fixed = SteeringFeatures(velocity_filter=0.02).fit(X)
     assert fixed.sampling_period_ == pytest.approx(PERIOD, rel=1e-12)

@@ -263,7 +263,8 @@ def _compiled_is_predict(model, compiled, X, groups):
 
 @pytest.fixture(scope="module")
 def pipeline(protocol, tmp_path_factory):
-    """K=12 over the 18 sensed inputs and the 5 derived ones (23 inputs), velocity filter on."""
+    """K=12 over the 18 sensed inputs and the derived ones (friction, hysteresis and load
+    inputs, chosen in fit), velocity filter on."""
     model = make_torque_pipeline(
         12, velocity_filter=0.2, sampling_period=0.05, n_iter=10, random_state=0
     )
@@ -274,7 +275,11 @@ def pipeline(protocol, tmp_path_factory):
 
 def test_the_pipelines_derived_inputs_and_velocity_filter(pipeline, protocol):
     model, compiled = pipeline
-    assert model[-1].n_features_in_ == 23
+    features = model[0]
+    # the C filter's plays are tested here too
+    assert features.friction_angle_ is not None and features.friction_velocity_ is not None
+    n_friction = len(features.friction_velocity_) + len(features.friction_angle_)
+    assert model[-1].n_features_in_ == len(FEATURE_NAMES) + n_friction + 4
     X, groups = protocol[list(FEATURE_NAMES)], protocol["recording"]
     expected = _compiled_is_predict(model, compiled, X, groups)
     # one recording for all rows: another velocity filter, other estimates

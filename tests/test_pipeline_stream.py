@@ -176,7 +176,8 @@ def test_a_held_row_still_feeds_the_velocity_filter(data, filtered, column, valu
     if column == "steering_wheel_velocity":  # the rule matters here
         skipped = rows.copy()
         skipped.iloc[held, rows.columns.get_loc(column)] = np.nan
-        friction = filtered[:-1].transform(skipped)["steering_friction"].to_numpy()
+        first = filtered[0].get_feature_names_out()[len(COLUMNS)]  # a friction input
+        friction = filtered[:-1].transform(skipped)[first].to_numpy()
         assert np.abs(friction[302:310] - derived[302:310, len(COLUMNS)]).max() > 1e-3
 
 
@@ -333,6 +334,8 @@ def test_the_velocity_filter_of_the_stream_is_a_plain_loop():
         "friction_velocity": 0.1,
         "filter_decay": decay,
         "sampling_period": 0.01,
+        "angle_position": None,
+        "friction_angle": None,
         "load_positions": [],
         "powers": [],
     }
@@ -351,6 +354,46 @@ def test_the_velocity_filter_of_the_stream_is_a_plain_loop():
     values = [0.05]
     stage.append(values)
     assert values[1] == pytest.approx(math.tanh(0.5), abs=1e-15)  # starts at the value again
+
+
+def _plain_play(angle, radius):
+    """A plain loop of the play: the position follows the angle at most ``radius`` behind,
+    from the first observed angle; a missing angle gives NaN and moves nothing."""
+    out, position = [], None
+    for value in angle:
+        if not math.isfinite(value):
+            out.append(math.nan)
+            continue
+        position = value if position is None else min(max(position, value - radius), value + radius)
+        out.append((value - position) / radius)
+    return np.array(out)
+
+
+def test_the_plays_of_the_stream_and_the_transform_are_a_plain_loop():
+    """The hysteresis inputs, sample by sample (the stream) and per recording (the batch
+    transform), against a plain loop of the play, with missing angles; the stream restarts
+    at its reset, the transform at every recording."""
+    radii = (0.002, 0.01)
+    rng = np.random.default_rng(3)
+    angle = np.cumsum(rng.normal(scale=0.004, size=120))
+    angle[[0, 7, 8, 50]] = np.nan
+    groups = np.repeat(["a", "b"], 60)
+    step = SteeringFeatures(friction_velocity=None, load_columns=(), friction_angle=radii)
+    step.angle_column = 0
+    batch = step.fit_transform(angle[:, np.newaxis], groups=groups)[:, 1:]
+    stage = DerivedInputs(step.stream_settings())
+    for recording in ("a", "b"):
+        rows = groups == recording
+        expected = np.column_stack([_plain_play(angle[rows], r) for r in radii])
+        stage.reset()
+        streamed = []
+        for value in angle[rows]:
+            values = [float(value)]
+            stage.append(values)
+            streamed.append(values[1:])
+        np.testing.assert_array_equal(np.asarray(streamed), expected)
+        np.testing.assert_array_equal(batch[rows], expected)
+    assert np.nanmax(np.abs(batch)) == pytest.approx(1.0, abs=1e-12)  # a play turned over
 
 
 @pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")

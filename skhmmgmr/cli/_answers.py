@@ -16,7 +16,7 @@ RULE = (
 )
 
 
-def _count(n, noun):
+def counted(n, noun):
     """``3 features``, ``1 feature``."""
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
@@ -41,7 +41,7 @@ def selected_answer(models, choices, *, trade_off, features, n_states, n_validat
         else f"the smaller, K = {n_states}, is kept"
     )
     return (
-        f"The framework selected {_count(len(features), 'feature')} ({', '.join(features)}) and "
+        f"The framework selected {counted(len(features), 'feature')} ({', '.join(features)}) and "
         f"K = {n_states} hidden states, weighting accuracy {accuracy:g} % and smoothness "
         f"{smoothness:g} % (trade-off {trade_off}). The features were chosen by the filter, the "
         f"wrappers and their relevance over the trade-offs; for K, {RULE}. On the "
@@ -75,7 +75,7 @@ def trade_off_answer(models, *, trade_off):
         f"{selected['smoothness']:.2f} against {baseline['smoothness']:.2f} Nm/s (lower is "
         f"smoother), rmse {selected['rmse']:.3f} against {baseline['rmse']:.3f} Nm. The "
         f"selected model is {accuracy_words} and {smoothness_words}, from "
-        f"{_count(int(selected['n_inputs']), 'sensor')} instead of "
+        f"{counted(int(selected['n_inputs']), 'sensor')} instead of "
         f"{int(baseline['n_inputs'])}: that is the trade-off {trade_off} asks for (a smooth "
         "estimate from few sensors, its states readable as driving phases), not the most "
         "accurate estimate of the torque."
@@ -115,8 +115,8 @@ def drive_answer(lane_keeping, *, road):
         elif row.departures > human.departures:
             verdicts.append(
                 f"the {row.driver} keeps the car on the road but leaves its lane "
-                f"{int(row.departures)} times where the human left it {int(human.departures)} "
-                "times"
+                f"{counted(int(row.departures), 'time')} where the human left it "
+                f"{counted(int(human.departures), 'time')}"
             )
         else:
             verdicts.append(
@@ -133,7 +133,7 @@ def drive_answer(lane_keeping, *, road):
         ending = f"; lost control at {lost:.1f} s" if lost is not None else ""
         lines.append(
             f"{row.driver}: lateral deviation {row.lateral_deviation_rms:.2f} m rms (largest "
-            f"{row.lateral_deviation_max:.2f} m), {_count(int(row.departures), 'lane departure')} "
+            f"{row.lateral_deviation_max:.2f} m), {counted(int(row.departures), 'lane departure')} "
             f"({row.time_out_of_lane:.1f} s out of the lane), torque {row.torque_rms:.2f} Nm "
             f"rms{ending}."
         )

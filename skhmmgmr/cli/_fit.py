@@ -62,8 +62,12 @@ PIPELINES = ("hmmgmr", "torque")
 # Options of --pipeline torque, the parameters of make_torque_pipeline they set.
 TORQUE_OPTIONS = {
     "friction_velocity": "steering-wheel velocity [rad/s] over which friction changes sign "
-    "('auto': chosen on the training recordings; 'none': no friction input)",
+    "('auto': no band, one band or a basis of several, their widths read from the velocity "
+    "and chosen on the training recordings; 'none': no friction input)",
     "friction_column": "column of the steering-wheel velocity",
+    "friction_angle": "half-width [rad] of a play on the steering-wheel angle, the hysteresis "
+    "input of a column whose friction sticks ('auto': none or several chosen on the training "
+    "recordings; 'none': no hysteresis input)",
     "load_columns": "columns whose signed powers are appended (the option alone: none)",
     "powers": "powers >= 2 appended for every load column",
     "velocity_filter": "time constant [s] of a causal low-pass filter on the velocity before "
@@ -153,11 +157,16 @@ def command_fit(args):
     if args.pipeline == "torque":
         names = list(model[0].get_feature_names_out())[len(features) :]
         derived = f"; derived by the torque pipeline: {', '.join(names) or 'none'}"
-        if model[0].friction_velocity is not None:
+        friction = model[0].friction_velocity_
+        if friction is not None:
+            widths = friction if isinstance(friction, tuple) else (friction,)
             derived += (
-                f" (friction_velocity {model[0].friction_velocity_:g}, velocity_filter "
+                f" (friction_velocity {', '.join(f'{w:g}' for w in widths)}, velocity_filter "
                 f"{model[0].velocity_filter_ or 'none'})"
             )
+        radii = model[0].friction_angle_
+        if radii is not None:
+            derived += f" (friction_angle {', '.join(f'{r:g}' for r in radii)})"
         derived += f"; read-out time constant {model[-1].output_smoothing_:g} rows"
     log(
         args,
@@ -184,6 +193,7 @@ def _add_torque_options(parser):
     kinds = {
         "friction_velocity": dict(type=checked_by(setting, SteeringFeatures, "friction_velocity")),
         "friction_column": {},
+        "friction_angle": dict(type=checked_by(setting, SteeringFeatures, "friction_angle")),
         "load_columns": dict(nargs="*"),
         "powers": dict(nargs="*", type=int),
         "velocity_filter": dict(type=checked_by(setting, SteeringFeatures, "velocity_filter")),

@@ -23,7 +23,15 @@ from sklearn.base import clone
 from threadpoolctl import threadpool_limits
 
 from .._core._progress import progress_bar
-from .._core._schema import PREVIEW_FEATURES, RECORDING, SPLIT, TARGET, TIME
+from .._core._schema import (
+    DRIVER_MODEL_FEATURES,
+    RECORDING,
+    SPLIT,
+    STEERING_PERTURBATION,
+    TARGET,
+    TIME,
+)
+from ._answers import counted
 
 #: The road of the closed loop: a seed none of the protocol's sections draws (they draw theirs
 #: from the run's seed), the evaluation setting, one minute.
@@ -54,6 +62,8 @@ class Candidate:
     saved: bool
     estimate: np.ndarray = field(repr=False, default=None)
     std: np.ndarray = field(repr=False, default=None)
+    #: rows it is fitted on when they are not the framework's training rows
+    training: pd.DataFrame = field(repr=False, default=None)
 
 
 @dataclass
@@ -69,22 +79,24 @@ class Showcase:
     lane_keeping: pd.DataFrame = None
 
 
-def driver_model(seed):
-    """The model meant to drive: ``(label, estimator, features, how it is made)``.
+#: The demo's perturbation experiment for the driver model: the default experiment of
+#: :func:`~skhmmgmr.make_driver_model` (0.2 Nm RMS in a third of the training recordings).
+DRIVER_EXPERIMENT = dict(perturbation=0.2, perturbed_share=1 / 3)
 
-    The slot of ``skhmmgmr.make_driver_model`` (#52). Until it is in the package, the
-    closed-loop-capable model that exists stands in, and says so: HMM-GMR on what the driver
-    sees of the road (:data:`~skhmmgmr.datasets.PREVIEW_FEATURES`, the user guide's "The
-    driver model at the wheel"), which drives and estimates recorded torque less accurately.
-    """
-    from ..estimator import HMMGMRRegressor
 
-    label = "driver model (stand-in: HMM-GMR on the road preview, K=5)"
+def driver_model(seed, *, sampling_period):
+    """The model meant to drive: ``(label, estimator, features, how it is made)``."""
+    from ..torque_pipeline import make_driver_model
+
+    label = "driver model (torque pipeline fitted on a perturbation experiment, K=1)"
     made = (
-        "HMMGMRRegressor(n_states=5) on the 7 road-preview features (lane position, heading "
-        "and curvature ahead), standing in for make_driver_model until the package has it"
+        "make_driver_model() on the sensed features but the wheel's acceleration, fitted on "
+        "the training sections of which a third carried a 0.2 Nm RMS torque on the wheel "
+        "that the driver did not know (make_driving_protocol(perturbation=0.2, "
+        "perturbed_share=1/3)), so that it leans less on the wheel's own response"
     )
-    return label, HMMGMRRegressor(n_states=5, random_state=seed), list(PREVIEW_FEATURES), made
+    model = make_driver_model(sampling_period=sampling_period, random_state=seed)
+    return label, model, list(DRIVER_MODEL_FEATURES), made
 
 
 def _missing(columns, available):
@@ -92,8 +104,14 @@ def _missing(columns, available):
 
 
 def _fit(candidate, train, groups=True):
+    if candidate.training is not None:
+        train = candidate.training
     X = train[candidate.features]
-    if groups:
+    if candidate.key == "driver_model":
+        candidate.model.fit(
+            X, train[TARGET], groups=train[RECORDING], perturbation=train[STEERING_PERTURBATION]
+        )
+    elif groups:
         candidate.model.fit(X, train[TARGET], groups=train[RECORDING])
     else:
         with threadpool_limits(limits=1):  # OpenMP threads on a small fit only spin
@@ -117,7 +135,7 @@ def framework_candidates(report, train, test):
     names; the same fit as the framework's) and the baseline."""
     selected = Candidate(
         "selected_model",
-        f"selected model ({len(report.features)} features, K={report.n_states})",
+        f"selected model ({counted(len(report.features), 'feature')}, K={report.n_states})",
         "the thesis' model: few sensors, a smooth estimate, states to read",
         clone(report.final_model),
         list(report.features),
@@ -126,7 +144,7 @@ def framework_candidates(report, train, test):
     baseline = list(report.candidates.loc[report.candidates["name"] == "Baseline", "features"])[0]
     base = Candidate(
         "baseline",
-        f"all-feature baseline ({len(baseline)} features, K={report.n_states})",
+        f"all-feature baseline ({counted(len(baseline), 'feature')}, K={report.n_states})",
         "the reference the selection is measured against",
         report.baseline_model,
         list(baseline),
@@ -139,9 +157,10 @@ def framework_candidates(report, train, test):
     return selected, base
 
 
-def other_candidates(features, columns, *, sampling_period, seed):
+def other_candidates(features, columns, *, sampling_period, seed, experiment=None):
     """The torque pipeline, gradient boosting and the driver model (unfitted), and a note
-    for each left out for want of columns."""
+    for each left out for want of columns. ``experiment``: the training rows of a
+    perturbation experiment, which the driver model is fitted on (left out without)."""
     from sklearn.ensemble import HistGradientBoostingRegressor
 
     from ..torque_pipeline import make_torque_pipeline
@@ -161,7 +180,7 @@ def other_candidates(features, columns, *, sampling_period, seed):
         found.append(
             Candidate(
                 "torque_pipeline",
-                f"torque pipeline ({len(features)} features + derived steering inputs, "
+                f"torque pipeline ({counted(len(features), 'feature')} + derived steering inputs, "
                 f"K={TORQUE_PIPELINE_STATES})",
                 "the most accurate estimate of the recorded torque, for assistance and observers "
                 "(it estimates; it is no driver: at the wheel it does not keep a lane)",
@@ -173,18 +192,26 @@ def other_candidates(features, columns, *, sampling_period, seed):
     found.append(
         Candidate(
             "gradient_boosting",
-            f"gradient boosting ({len(features)} features)",
+            f"gradient boosting ({counted(len(features), 'feature')})",
             "the usual yardstick (scikit-learn's HistGradientBoostingRegressor, defaults)",
             HistGradientBoostingRegressor(random_state=seed),
             list(features),
             saved=False,
         )
     )
-    label, model, inputs, made = driver_model(seed)
+    label, model, inputs, made = driver_model(seed, sampling_period=sampling_period)
     missing = _missing(inputs, columns)
     if missing:
         notes["driver_model"] = (
             f"The driver model is left out: it reads the columns {inputs}; the data lack {missing}."
+        )
+    elif experiment is None:
+        notes["driver_model"] = (
+            "The driver model is left out: it is fitted on recordings of a perturbation "
+            f"experiment (a column {STEERING_PERTURBATION!r}, the torque in Nm that the "
+            "experiment put on the steering wheel, 0 where there was none; "
+            "skhmmgmr.datasets.make_driving_protocol(perturbation=...) simulates one), and the "
+            "training recordings have none."
         )
     else:
         found.append(
@@ -195,6 +222,7 @@ def other_candidates(features, columns, *, sampling_period, seed):
                 model,
                 inputs,
                 saved=True,
+                training=experiment,
             )
         )
     return found, notes
@@ -237,19 +265,27 @@ def models_table(showcase):
     return pd.DataFrame(rows)
 
 
-def run_showcase(report, data, *, sampling_period, seed):
+def run_showcase(report, data, *, sampling_period, seed, experiment=None):
     """Every model of the report fitted on the training rows and scored on the test rows.
 
-    The models beyond the framework's count as the steps of the caller's progress stage
+    The driver model is fitted on the training rows of ``experiment`` (a perturbation
+    experiment: the demo simulates one on the same training sections), else on those of
+    ``data`` when they carry the perturbation's column, else left out with a note. The
+    models beyond the framework's count as the steps of the caller's progress stage
     (:func:`~skhmmgmr._core._progress.progress_bar`).
     """
     train, test = split_rows(data)
+    if experiment is not None:
+        experiment = split_rows(experiment)[0]
+    elif STEERING_PERTURBATION in data.columns:
+        experiment = train
     selected, baseline = framework_candidates(report, train, test)
     others, notes = other_candidates(
         list(baseline.features),
         data.columns,
         sampling_period=sampling_period,
         seed=seed,
+        experiment=experiment,
     )
     candidates = {c.key: c for c in (selected, baseline)}
     for candidate in progress_bar(others, total=len(others), desc="models"):

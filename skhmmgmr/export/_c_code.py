@@ -3,9 +3,13 @@ arrays, the derived inputs of a torque pipeline, the log-densities and the state
 
 Every number and every operation is of the filter's arithmetic (``double``, or ``float`` for
 ``dtype="float32"``: ``float`` literals and ``expf``, ``tanhf``, ``powf``, ``fabsf``, so that no
-value is promoted to ``double`` on the way); a signed power ``sign(x) |x|^p`` is a chain of
-multiplications in single precision up to :data:`CHAINED_POWERS`, ``pow``/``powf`` beyond (and
-for ``p > 2`` in double precision, as :class:`~skhmmgmr.SteeringFeatures` computes it).
+value is promoted to ``double`` on the way); the friction inputs are ``tanh(v /
+friction_velocity)`` for one band, ``tanh(v / friction_widths[j])`` for every width of a
+basis, the velocity (filtered or not) read once; the hysteresis inputs are ``(a - p_j) /
+friction_radii[j]`` of the plays on the angle (their positions in the state); a signed power
+``sign(x) |x|^p`` is a chain of multiplications in single precision up to
+:data:`CHAINED_POWERS`, ``pow``/``powf`` beyond (and for ``p > 2`` in double precision, as
+:class:`~skhmmgmr.SteeringFeatures` computes it).
 """
 
 import numpy as np
@@ -51,8 +55,13 @@ def _named_parameters(spec):
         parts.append(("output_gain", 1.0 - decay, None))
     constants = []
     derived = spec.derived
-    if derived.friction is not None:
-        constants.append(("friction_velocity", derived.friction[1]))
+    if derived.friction is not None and len(derived.friction[1]) == 1:
+        constants.append(("friction_velocity", derived.friction[1][0]))
+    elif derived.friction is not None:
+        parts.append(("friction_widths", np.asarray(derived.friction[1]), "friction basis"))
+    if derived.hysteresis is not None:
+        radii = np.asarray(derived.hysteresis[1])
+        parts.append(("friction_radii", radii, "half-widths of the plays (hysteresis inputs)"))
     if derived.velocity_decay is not None:
         constants.append(("velocity_decay", derived.velocity_decay))
         constants.append(("velocity_gain", 1.0 - derived.velocity_decay))
@@ -97,8 +106,21 @@ def derived_code(spec, dtype):
         velocity = f"inputs[{derived.friction[0]}]"
         if derived.velocity_decay is not None:
             velocity = f"low_pass(state, {velocity})"
-        lines.append(f"    x[{column}] = {tanh}({velocity} / friction_velocity);")
-        column += 1
+        widths = derived.friction[1]
+        if len(widths) == 1:
+            lines.append(f"    x[{column}] = {tanh}({velocity} / friction_velocity);")
+        else:  # a basis: the velocity read once (the filter steps once), every width
+            real = TYPES[dtype]["real"]
+            lines.append(f"    {{\n        const {real} velocity = {velocity};")
+            lines += [
+                f"        x[{column + j}] = {tanh}(velocity / friction_widths[{j}]);"
+                for j in range(len(widths))
+            ]
+            lines.append("    }")
+        column += len(widths)
+    if derived.hysteresis is not None:
+        lines.append(f"    play(state, inputs[{derived.hysteresis[0]}], x + {column});")
+        column += len(derived.hysteresis[1])
     for position, power in derived.powers:
         magnitude = _power(f"inputs[{position}]", power, dtype)
         lines.append(f"    x[{column}] = signum(inputs[{position}]) * ({magnitude});")
@@ -132,6 +154,36 @@ static @REAL@ low_pass(@NAME@_state *state, @REAL@ velocity)
 }
 """
 
+_PLAY = """
+/* The hysteresis inputs (angle - p_j) / r_j of SteeringFeatures (friction_angle), the plays
+ * p_j following the angle at most r_j behind it from the recording's first finite angle; a
+ * non-finite angle leaves them alone (and holds the sample). */
+static void play(@NAME@_state *state, @REAL@ angle, @REAL@ *out)
+{
+    int j;
+    if (!isfinite(angle)) {
+        for (j = 0; j < @N_PLAYS@; ++j) {
+            out[j] = angle;
+        }
+        return;
+    }
+    if (!state->play_started) {
+        for (j = 0; j < @N_PLAYS@; ++j) {
+            state->play[j] = angle;
+        }
+        state->play_started = 1;
+    }
+    for (j = 0; j < @N_PLAYS@; ++j) {
+        if (state->play[j] < angle - friction_radii[j]) {
+            state->play[j] = angle - friction_radii[j];
+        } else if (state->play[j] > angle + friction_radii[j]) {
+            state->play[j] = angle + friction_radii[j];
+        }
+        out[j] = (angle - state->play[j]) / friction_radii[j];
+    }
+}
+"""
+
 _SIGNUM = """
 static @REAL@ signum(@REAL@ value)
 {
@@ -141,18 +193,23 @@ static @REAL@ signum(@REAL@ value)
 
 
 def helpers(spec, name, dtype):
-    """The static functions the derived inputs need: the velocity filter and the sign."""
+    """The static functions the derived inputs need: the velocity filter, the plays and the
+    sign."""
     types = TYPES[dtype]
+    hysteresis = spec.derived.hysteresis
     words = {
         "NAME": name,
         "REAL": types["real"],
         "POW": types["pow"],
         "ZERO": number(0.0, dtype),
         "ONE": number(1.0, dtype),
+        "N_PLAYS": str(0 if hysteresis is None else len(hysteresis[1])),
     }
     text = ""
     if spec.derived.velocity_decay is not None:
         text += _LOW_PASS
+    if hysteresis is not None:
+        text += _PLAY
     if spec.derived.powers:
         text += _SIGNUM
     for word, value in words.items():

@@ -33,6 +33,12 @@ def header(spec, name, dtype):
             f"    {real} velocity;       /* low-pass filtered velocity (friction input) */\n"
             f"    {real} velocity_since; /* samples since its last finite value; 0: none yet */\n"
         )
+    if spec.derived.hysteresis is not None:
+        n_plays = len(spec.derived.hysteresis[1])
+        velocity += (
+            f"    {real} play[{n_plays}];        /* the plays' positions (hysteresis inputs) */\n"
+            "    int play_started;      /* whether a finite angle was read since the reset */\n"
+        )
     names = comment(", ".join(spec.input_names), " * Inputs, in this order: ")
     return f"""\
 /* {name}.h: causal HMM-GMR filter of a fitted skhmmgmr model (C99).

@@ -4,10 +4,12 @@ The generated code runs what :class:`~skhmmgmr.FilterStream` runs (METHOD.md sec
 parameters written into the source as ``static const`` arrays (:mod:`._c_code`):
 
 1. the derived inputs of a torque pipeline (:class:`~skhmmgmr.SteeringFeatures`): the friction
-   input ``tanh(v / friction_velocity)`` of the velocity, low-pass filtered when the transformer
-   has ``velocity_filter`` (started at the recording's first finite velocity; a non-finite one
-   leaves the filter alone and the next is taken in over the whole time since the last, as
-   :func:`~skhmmgmr.torque_pipeline.low_pass`), and the signed powers ``sign(x) |x|^p``;
+   input ``tanh(v / friction_velocity)`` of the velocity (or ``tanh(v / w_j)`` for every width
+   of a friction basis), low-pass filtered when the transformer has ``velocity_filter``
+   (started at the recording's first finite velocity; a non-finite one leaves the filter
+   alone and the next is taken in over the whole time since the last, as
+   :func:`~skhmmgmr.torque_pipeline.low_pass`), the hysteresis inputs of the plays on the
+   angle (``friction_angle``), and the signed powers ``sign(x) |x|^p``;
 2. the standardised inputs ``z``; a non-finite one holds the sample (return 1), so do
    standardised inputs out of range (return 2: the outlier policy of
    :mod:`skhmmgmr._hmm._holds`, absolute values summing to 1e100 or more, 1e30 in ``float``);
@@ -90,6 +92,8 @@ def source(spec, name, dtype):
     velocity_reset = ""
     if spec.derived.velocity_decay is not None:
         velocity_reset = f"    state->velocity = {zero};\n    state->velocity_since = {zero};\n"
+    if spec.derived.hysteresis is not None:
+        velocity_reset += "    state->play_started = 0;\n"
     gather, source_of_z = _gather(spec, dtype)
     remember_started, read_out = _read_out(spec)
     read_out = read_out.replace("REAL", real)

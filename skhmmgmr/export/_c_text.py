@@ -67,14 +67,19 @@ def array(name, dtype, values, comment=None):
     return f"{head}static const {real} {name}[{len(numbers)}] = {{\n    {body}\n}};\n"
 
 
+# the model's numbers the filter divides by (beside the ``*scale`` ones)
+DIVISORS = ("friction_velocity", "friction_widths", "friction_radii")
+
+
 def check_float32(named_values):
     """Refuse, naming it, a value of ``named_values`` ({name: array-like}) that single
     precision cannot hold: beyond ``float``'s range (it would be written as an infinity) or,
-    for a ``*scale`` or ``friction_velocity`` divisor, non-zero but rounding to zero."""
+    for a ``*scale``, ``friction_velocity``, ``friction_widths`` or ``friction_radii``
+    divisor, non-zero but rounding to zero."""
     for name, values in named_values.items():
         values = np.ravel(np.asarray(values, dtype=float))
         beyond = np.abs(values) > _FLOAT32_MAX
-        if name.endswith("scale") or name == "friction_velocity":
+        if name.endswith("scale") or name in DIVISORS:
             beyond |= (values != 0) & (values.astype(np.float32) == 0)
         if beyond.any():
             value = float(values[np.flatnonzero(beyond)[0]])

@@ -34,24 +34,30 @@ from .._core._compat import InvalidParameterError
 from .._hmm._holds import check_min_log_density
 from ..estimator import HMMGMRRegressor
 from ..torque_pipeline import SteeringFeatures
+from ..torque_pipeline._derived_inputs import friction_widths
 
 
 @dataclass(frozen=True)
 class DerivedInputs:
     """The inputs :class:`~skhmmgmr.SteeringFeatures` appends, by raw-input position.
 
-    ``friction``: ``(position, friction_velocity)`` or None; ``powers``: ``(position, power)``
-    of every signed power in the transformer's column order; ``velocity_decay``: the decay of
-    the velocity's low-pass filter per sample, or None.
+    ``friction``: ``(position, widths)`` or None, ``widths`` the tuple of the friction inputs'
+    widths (one: a band, several: a basis); ``powers``: ``(position, power)`` of every signed
+    power in the transformer's column order; ``velocity_decay``: the decay of the velocity's
+    low-pass filter per sample, or None; ``hysteresis``: ``(position, radii)`` of the angle
+    and the plays' half-widths, or None.
     """
 
     friction: tuple = None
     powers: tuple = ()
     velocity_decay: float = None
+    hysteresis: tuple = None
 
     @property
     def n_derived(self):
-        return (self.friction is not None) + len(self.powers)
+        widths = () if self.friction is None else self.friction[1]
+        radii = () if self.hysteresis is None else self.hysteresis[1]
+        return len(widths) + len(radii) + len(self.powers)
 
 
 @dataclass(frozen=True)
@@ -161,25 +167,31 @@ def _derived_inputs(features, regressor):
     names = getattr(features, "feature_names_in_", None)
     raw_names = tuple(str(n) for n in names) if names is not None else None
     sources = list(features.load_columns)
-    if features.friction_velocity is not None:
+    if features.friction_velocity_ is not None:
         sources.append(features.friction_column)
+    if features.friction_angle_ is not None:
+        sources.append(features.angle_column)
     # fit checked that every source column exists
     positions = {
         column: (raw_names.index(column) if isinstance(column, str) else int(column))
         for column in sources
     }
     friction = None
-    if features.friction_velocity is not None:
-        friction = (positions[features.friction_column], float(features.friction_velocity_))
+    if features.friction_velocity_ is not None:
+        widths = friction_widths(features.friction_velocity_)
+        friction = (positions[features.friction_column], widths)
     powers = tuple(
         (positions[column], int(power))
         for column in features.load_columns
         for power in features.powers
     )
     decay = None
-    if features.friction_velocity is not None and features.velocity_filter_ is not None:
+    if features.friction_velocity_ is not None and features.velocity_filter_ is not None:
         decay = math.exp(-features.sampling_period_ / features.velocity_filter_)
-    derived = DerivedInputs(friction, powers, decay)
+    hysteresis = None
+    if features.friction_angle_ is not None:
+        hysteresis = (positions[features.angle_column], tuple(features.friction_angle_))
+    derived = DerivedInputs(friction, powers, decay, hysteresis)
     expected = list(features.get_feature_names_out())
     given = getattr(regressor, "feature_names_in_", None)
     if n_raw + derived.n_derived != regressor.n_features_in_ or (

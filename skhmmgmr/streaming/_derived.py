@@ -8,13 +8,16 @@ imports it: a step is read through the plain description it returns, a dict of
 
 ``n_features_in`` (int), ``feature_names_in`` (list of str or None), ``feature_names_out``
 (list of str), ``friction_position`` (int or None: no friction input), ``friction_velocity``
-(float), ``filter_decay`` (float or None: no velocity filter), ``sampling_period`` (float or
-None), ``load_positions`` (list of int) and ``powers`` (list of int).
+(float: one band; a list of floats: the widths of a basis, one friction input each),
+``filter_decay`` (float or None: no velocity filter), ``sampling_period`` (float or
+None), ``angle_position`` (int or None: no hysteresis input), ``friction_angle`` (list of
+floats: the plays' half-widths), ``load_positions`` (list of int) and ``powers`` (list of
+int).
 
 Every step appends its derived inputs to its input row, so the row the regressor reads is the
 sensed row followed by every step's derived inputs. An update reads the sensed row as a Python
 list once and computes the derived inputs with scalar operations (a handful per input); the
-only state is the velocity filter's, restarted at every recording.
+only state is the velocity filter's and the plays' positions, restarted at every recording.
 """
 
 import math
@@ -32,6 +35,8 @@ SETTINGS = (
     "friction_velocity",
     "filter_decay",
     "sampling_period",
+    "angle_position",
+    "friction_angle",
     "load_positions",
     "powers",
 )
@@ -46,7 +51,10 @@ class DerivedInputs:
     gives a missing friction input and leaves the state alone, the next observed one then
     taken in over the whole time since the last, ``decay^(g+1)`` after ``g`` missing ones. An
     infinite velocity is read as missing (the batch filter would carry it on for the rest of
-    the recording).
+    the recording). The plays of the hysteresis inputs are those of
+    :func:`skhmmgmr.torque_pipeline._derived_inputs.hysteresis_input` one sample at a time:
+    started at the recording's first observed angle, a missing (or infinite) angle gives
+    missing hysteresis inputs and leaves them alone.
 
     Parameters
     ----------
@@ -64,8 +72,12 @@ class DerivedInputs:
         self.feature_names_out = list(settings["feature_names_out"])
         self.friction = settings["friction_position"]
         self.friction_velocity = settings["friction_velocity"]
+        widths = self.friction_velocity
+        self.widths = tuple(widths) if isinstance(widths, list | tuple) else (widths,)
         self.decay = settings["filter_decay"]
         self.sampling_period = settings["sampling_period"]
+        self.angle = settings["angle_position"]
+        self.radii = tuple(float(r) for r in settings["friction_angle"] or ())
         self.loads = tuple(int(p) for p in settings["load_positions"])
         self.powers = tuple(int(p) for p in settings["powers"])
         if self.decay is not None:
@@ -78,9 +90,10 @@ class DerivedInputs:
         return len(self.feature_names_out)
 
     def reset(self):
-        """Restart the velocity filter (a new recording)."""
+        """Restart the velocity filter and the plays (a new recording)."""
         self.filtered = None  # the filter's output at the last observed velocity
         self.since = 0  # rows since that velocity
+        self.plays = None  # the plays' positions, from the first observed angle
 
     def append(self, values):
         """Append the derived inputs of one row (a list of floats, extended in place)."""
@@ -88,7 +101,10 @@ class DerivedInputs:
             velocity = values[self.friction]
             if self.decay is not None:
                 velocity = self.low_pass(velocity)
-            values.append(math.tanh(velocity / self.friction_velocity))
+            for width in self.widths:
+                values.append(math.tanh(velocity / width))
+        if self.angle is not None:
+            values.extend(self.hysteresis(values[self.angle]))
         powers = self.powers
         for position in self.loads:
             x = values[position]
@@ -99,6 +115,23 @@ class DerivedInputs:
                 except OverflowError:  # the batch transform's inf, held as non-finite
                     value = math.inf
                 values.append(value if x >= 0.0 else -value)
+
+    def hysteresis(self, angle):
+        """The hysteresis inputs of the next row's angle (NaN for a missing one)."""
+        if not math.isfinite(angle):
+            return [math.nan] * len(self.radii)
+        if self.plays is None:
+            self.plays = [angle] * len(self.radii)
+        out = []
+        for j, radius in enumerate(self.radii):
+            position = self.plays[j]
+            if position < angle - radius:
+                position = angle - radius
+            elif position > angle + radius:
+                position = angle + radius
+            self.plays[j] = position
+            out.append((angle - position) / radius)
+        return out
 
     def low_pass(self, velocity):
         """The filtered velocity of the next row (NaN for a missing one)."""
@@ -119,7 +152,7 @@ class DerivedInputs:
 
     def check_time(self, time, groups):
         """Refuse time stamps whose median step in a recording is not ``sampling_period``
-        (within 1 %), as the step's own transform does."""
+        (within 1 %), as the step's own transform does (for the velocity filter)."""
         if self.decay is None or time is None:
             return
         recordings = as_recordings(groups, len(time))

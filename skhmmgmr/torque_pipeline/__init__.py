@@ -9,7 +9,7 @@ from ._derived_inputs import low_pass as low_pass
 from ._driver_model import DEFAULT_PERTURBATION_PENALTY as DEFAULT_PERTURBATION_PENALTY
 from ._driver_model import DriverModel, make_driver_model
 from ._friction_search import FILTER_CANDIDATES as FILTER_CANDIDATES
-from ._friction_search import FRICTION_CANDIDATES as FRICTION_CANDIDATES
+from ._friction_search import WIDTH_GRID as WIDTH_GRID
 from ._pipeline import TorquePipeline, make_torque_pipeline
 from ._steering_features import SteeringFeatures
 

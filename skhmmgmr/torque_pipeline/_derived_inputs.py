@@ -6,9 +6,20 @@ self-aligning torque of the front tyres, the wheel's inertia and damping, and Co
 Two parts of that balance are not linear in any sensed input, and a mixture of local linear
 regressions gated by Gaussians can follow them only with many states:
 
-- **friction** switches sign with the steering-wheel velocity over a few hundredths of a radian
+- **friction** switches sign with the steering-wheel velocity over a band of velocities that
+  differs from one steering system to the next, from a few thousandths to tenths of a radian
   per second: ``tanh(steering_wheel_velocity / friction_velocity)`` (:func:`friction_input`,
-  named ``steering_friction``);
+  named ``steering_friction``), or a basis of several bands at once, ``tanh(v / w_j)`` for the
+  widths ``w_j`` (:func:`friction_inputs`, named ``steering_friction_<w_j>``), whose
+  combination the regression fits: the shape of the friction curve, from the data;
+- **friction has a memory**: a column whose friction sticks holds the wheel until the driver
+  has turned it far enough to overcome it (through a torsion bar, the bar's twist under the
+  friction torque), whatever the velocity; the driver's torque then follows the angle turned
+  since the last reversal, the hysteresis of a steering system's torque against its angle.
+  A play of half-width ``r`` on the steering-wheel angle (``p_t = clip(p_(t-1), x_t - r, x_t
+  + r)``, the elementary operator of rate-independent hysteresis) gives ``(x_t - p_t) / r`` in
+  [-1, 1] (:func:`hysteresis_input`, named ``steering_hysteresis_<r>``, a basis of several
+  half-widths ``friction_angle``);
 - **the steering load is compressed**: the boost curve of an electric power assist grows with
   the torque (the driver's share of a large load is smaller), and the tyres' aligning torque
   saturates with slip. Odd powers of the load's proxies (the steering-wheel angle and the lateral
@@ -17,7 +28,8 @@ regressions gated by Gaussians can follow them only with many states:
 
 At high sampling rates the measured velocity is noisy at the scale of the friction band; a
 causal first-order filter (:func:`low_pass`, restarted at every recording by
-:func:`filtered_velocity`) keeps that noise out of the friction input. The stream
+:func:`filtered_velocity`) keeps that noise out of the friction input. The play restarts at
+every recording too (:func:`recording_hysteresis`). The stream
 (``skhmmgmr/streaming/_derived.py``) and the generated C compute the same inputs one sample
 at a time.
 """
@@ -26,17 +38,47 @@ import math
 import numbers
 
 import numpy as np
+from numba import njit
 from scipy.signal import lfilter
 
 from ..streaming._derived import check_time_steps
 
 #: The name of the friction input.
 FRICTION_NAME = "steering_friction"
+#: The prefix of the names of the hysteresis inputs.
+HYSTERESIS_NAME = "steering_hysteresis"
 
 
 def friction_input(velocity, friction_velocity):
     """The friction input ``tanh(velocity / friction_velocity)`` of every row."""
     return np.tanh(velocity / friction_velocity)
+
+
+def friction_widths(friction):
+    """The widths of the friction inputs of ``friction`` (a ``friction_velocity``: one band, a
+    tuple of widths or None), as a tuple of floats."""
+    if friction is None:
+        return ()
+    if isinstance(friction, tuple | list):
+        return tuple(float(width) for width in friction)
+    return (float(friction),)
+
+
+def friction_names(friction):
+    """The names of the friction inputs of ``friction``: ``steering_friction`` for one band,
+    ``steering_friction_<width>`` (three significant digits) for every width of a basis."""
+    if friction is None:
+        return []
+    if isinstance(friction, tuple | list):
+        return [f"{FRICTION_NAME}_{float(width):.3g}" for width in friction]
+    return [FRICTION_NAME]
+
+
+def friction_inputs(velocity, friction):
+    """The friction inputs of ``friction`` (see :func:`friction_names`) of every row, by name."""
+    names = friction_names(friction)
+    widths = friction_widths(friction)
+    return {name: friction_input(velocity, w) for name, w in zip(names, widths, strict=True)}
 
 
 def power_name(column, power):
@@ -60,23 +102,73 @@ def load_inputs(values, positions, load_columns, powers):
     return derived
 
 
-def derived_names(friction, load_columns, powers):
-    """The names of the derived inputs, in their order: the friction input (with
-    ``friction``), then the signed powers of every load column."""
-    names = [FRICTION_NAME] if friction else []
+def hysteresis_names(radii):
+    """The names of the hysteresis inputs of the half-widths ``radii`` (a tuple, or None):
+    ``steering_hysteresis_<r>``, ``r`` to three significant digits."""
+    return [f"{HYSTERESIS_NAME}_{float(r):.3g}" for r in radii or ()]
+
+
+@njit(cache=True)
+def _play(values, radius, out):
+    """The play of half-width ``radius`` over one recording's ``values`` into ``out``; NaN
+    gives NaN and leaves the play alone, the first observed value starts it (output 0)."""
+    started = False
+    position = 0.0
+    for t in range(values.shape[0]):
+        x = values[t]
+        if not np.isfinite(x):
+            out[t] = np.nan
+            continue
+        if not started:
+            position = x
+            started = True
+        elif position < x - radius:
+            position = x - radius
+        elif position > x + radius:
+            position = x + radius
+        out[t] = (x - position) / radius
+
+
+def hysteresis_input(angle, radius):
+    """The hysteresis input ``(x_t - p_t) / radius`` of one recording's angle, the play ``p``
+    started at the first observed angle (see the module's docstring)."""
+    out = np.empty(len(angle))
+    _play(np.ascontiguousarray(angle, dtype=float), float(radius), out)
+    return out
+
+
+def recording_hysteresis(angle, layout, radii):
+    """The hysteresis inputs of rows in filter order (their recordings' ``layout``), the play
+    restarted at every recording, by name."""
+    recordings = layout.recordings(len(angle))
+    inputs = {}
+    for name, radius in zip(hysteresis_names(radii), radii, strict=True):
+        column = np.empty(len(angle))
+        for start, stop in zip(recordings.starts, recordings.stops, strict=True):
+            column[start:stop] = hysteresis_input(angle[start:stop], radius)
+        inputs[name] = column
+    return inputs
+
+
+def derived_names(friction, load_columns, powers, radii=None):
+    """The names of the derived inputs, in their order: the friction inputs of ``friction``
+    (a ``friction_velocity``, see :func:`friction_names`), the hysteresis inputs of ``radii``
+    (a ``friction_angle``), then the signed powers of every load column."""
+    names = friction_names(friction) + hysteresis_names(radii)
     names += [power_name(column, power) for column in load_columns for power in powers]
     return names
 
 
-def derived_units(units, friction, load_columns, powers):
+def derived_units(units, friction, load_columns, powers, radii=None):
     """The units of the input columns (a mapping of names to units, or ``None``) with those of
-    the derived inputs added: 1 for the friction input, ``(unit)^p`` for the power ``p`` of a
-    column with a unit; ``None`` without units."""
+    the derived inputs added: 1 for the friction inputs of ``friction`` and the hysteresis
+    inputs of ``radii``, ``(unit)^p`` for the power ``p`` of a column with a unit; ``None``
+    without units."""
     if not isinstance(units, dict):
         return None
     units = dict(units)
-    if friction:
-        units[FRICTION_NAME] = "1"
+    for name in friction_names(friction) + hysteresis_names(radii):
+        units[name] = "1"
     for column in load_columns:
         unit = units.get(column)
         for power in powers:
@@ -133,3 +225,26 @@ def filtered_velocity(velocity, layout, sampling_period, time_constant):
     for start, stop in zip(recordings.starts, recordings.stops, strict=True):
         filtered[start:stop] = low_pass(velocity[start:stop], decay)
     return filtered
+
+
+def check_widths(widths, parameter, names_of):
+    """Refuse a basis (of ``parameter``, whose inputs ``names_of`` names) that is empty, holds
+    a width that is not a positive finite number, or two widths of one name."""
+    if not widths:
+        raise ValueError(f"{parameter}={widths!r} holds no width; give None for no such input.")
+    for width in widths:
+        if (
+            isinstance(width, bool)
+            or not isinstance(width, numbers.Real)
+            or not math.isfinite(width)
+            or width <= 0
+        ):
+            raise ValueError(
+                f"{parameter} must hold widths > 0; got {width!r} in {parameter}={widths!r}."
+            )
+    names = names_of(tuple(widths))
+    if len(set(names)) != len(names):
+        raise ValueError(
+            f"{parameter}={widths!r} repeats a width (to three significant digits, which "
+            f"name the inputs: {names})."
+        )

@@ -206,7 +206,9 @@ def make_driver_model(
     friction_velocity, friction_column, load_columns, powers, velocity_filter
         Passed to :class:`SteeringFeatures` (see :func:`make_torque_pipeline`). The load's
         signed square only (``powers=(2,)``): a cube makes the torque grow without bound
-        with the wheel's angle, which at the wheel runs away on sharp curves.
+        with the wheel's angle, which at the wheel runs away on sharp curves. No plays on
+        the angle (``friction_angle=None``): the driver model was measured at the wheel
+        without them.
     {sampling_period}
     output_smoothing : None, float >= 0 or "auto", default="auto"
         Passed to :class:`~skhmmgmr.HMMGMRRegressor` (see :func:`make_torque_pipeline`).
@@ -258,6 +260,8 @@ def make_driver_model(
         velocity_filter=velocity_filter,
         sampling_period=sampling_period,
         output_smoothing=output_smoothing,
+        # no plays on the angle: the driver model was measured at the wheel without them
+        friction_angle=None,
         random_state=random_state,
         **params,
     )

@@ -1,14 +1,41 @@
-"""The ``"auto"`` choice of the friction band and the velocity filter of ``SteeringFeatures``.
+"""The ``"auto"`` choice of the friction inputs, the hysteresis inputs and the velocity filter
+of ``SteeringFeatures``.
 
-The friction band is the steering system's, and whether the velocity needs the filter depends
-on its sensor: both differ from car to car. With ``"auto"`` (the default of
-:func:`~skhmmgmr.make_torque_pipeline`) ``fit`` chooses them on the training recordings:
-every candidate of :data:`FRICTION_CANDIDATES` and :data:`FILTER_CANDIDATES` is scored by the
-held-out error of a least-squares fit of the target on the inputs and the derived inputs, the
-recordings split in :data:`SEARCH_FOLDS` folds, and the candidate of least error is kept. A
-linear fit ranks the candidates nearly as the regressor does (the friction input enters every
-state's regression alike) at a small part of its cost: one pass over the rows per fold and
-candidate, the fits coming from the folds' sums of products.
+Friction differs from one steering system to the next: the band of steering-wheel velocities
+over which it changes sign spans two orders of magnitude among cars (a few thousandths to
+tenths of a radian per second), and how finely the velocity resolves that band depends on the
+sensor and the sampling rate. With ``friction_velocity="auto"`` (the default of
+:func:`~skhmmgmr.make_torque_pipeline`) ``fit`` reads the friction inputs from the training
+recordings:
+
+- **the ladder** (:func:`velocity_ladder`): widths a factor 2 apart on :data:`WIDTH_GRID`
+  (``0.1 * 2**k`` rad/s), from the narrowest the velocity resolves (a band whose transition,
+  ``|v| < 2 w``, holds at least the :data:`LADDER_QUANTILES` low share of the rows with a
+  non-zero velocity: below the velocity's noise and quantisation scale every narrower band is
+  the same sign of the noise) up to the widest the data needs (the high quantile of ``|v|``:
+  a wider band is nearly linear over almost every row, and the velocity is an input already),
+  read from the velocity the inputs use: each velocity filter's own, a filtered velocity
+  being less noisy and resolving narrower bands;
+- **the ladder of the hysteresis** (``friction_angle="auto"``, :func:`angle_ladder`): plays
+  of half-widths a factor 2 apart on :data:`RADIUS_GRID` (``0.001 * 2**k`` rad), from half the
+  angle's resolution (the low :data:`ANGLE_QUANTILES` quantile of its non-zero steps: a
+  narrower play turns over at every step) up to the high quantile of the angle's distance
+  from its median (a wider play is nearly the angle itself);
+- **the candidates**: no friction input, and every window of consecutive widths of the ladder
+  (a basis ``tanh(v / w_j)``, whose combination each state's regression fits: one width is
+  one band), each with no hysteresis input or every window of consecutive half-widths of its
+  ladder, with each velocity filter of :data:`FILTER_CANDIDATES`;
+- **the score**: the held-out error of a least-squares fit of the target on the inputs, the
+  load inputs and the candidate's friction and hysteresis inputs, the recordings split in
+  :data:`SEARCH_FOLDS` folds;
+- **the rule**: the fewest friction and hysteresis inputs whose error is within
+  :data:`PARSIMONY` of the least; of those, the least error. A car without friction keeps
+  none, a car whose friction one band describes keeps one, a column whose friction sticks
+  keeps plays.
+
+A linear fit ranks the candidates nearly as the regressor does (the friction inputs enter
+every state's regression alike) at a small part of its cost: one pass over the rows per
+velocity filter and fold, every candidate's fit coming from the fold's sums of products.
 """
 
 import math
@@ -16,32 +43,93 @@ import math
 import numpy as np
 import pandas as pd
 
+from ._derived_inputs import (
+    filtered_velocity,
+    friction_inputs,
+    friction_widths,
+    load_inputs,
+    recording_hysteresis,
+)
+
 AUTO = "auto"
-#: The friction bands [rad/s] ``friction_velocity="auto"`` compares (a factor 2 apart, over the
-#: bands of passenger cars' steering systems).
-FRICTION_CANDIDATES = (0.025, 0.05, 0.1, 0.2, 0.4, 0.8)
+#: The widths [rad/s] a ladder of friction bands takes, a factor 2 apart: ``0.1 * 2**k``,
+#: from 0.1 / 1024 (below any velocity sensor's resolution) to 1.6 rad/s.
+WIDTH_GRID = tuple(0.1 * 2.0**k for k in range(-10, 5))
+#: The shares of the rows (with a non-zero velocity) that set the ladder's ends: the
+#: narrowest band's transition ``|v| < 2 w`` holds at least the first, the widest band is at
+#: most the second quantile of ``|v|``.
+LADDER_QUANTILES = (0.05, 0.9)
+#: The half-widths [rad] a ladder of plays takes, a factor 2 apart: ``0.001 * 2**k``, from
+#: 1/16 to 64 mrad.
+RADIUS_GRID = tuple(0.001 * 2.0**k for k in range(-4, 7))
+#: The quantiles that set the ends of the ladder of plays: of the angle's non-zero steps
+#: (twice the narrowest at least), of its distance from its median (the widest at most).
+ANGLE_QUANTILES = (0.05, 0.25)
 #: The velocity filters [s] ``velocity_filter="auto"`` compares (``None``: no filter).
 FILTER_CANDIDATES = (None, 0.02, 0.05)
 #: Folds of the inner validation of the "auto" choices.
 SEARCH_FOLDS = 3
+#: The relative held-out error within which fewer friction and hysteresis inputs are
+#: preferred.
+PARSIMONY = 0.005
 
 
-def search_candidates(friction_velocity, velocity_filter, sampling_period):
-    """The (friction band, velocity filter) pairs the inner validation compares: every
-    candidate of an ``"auto"`` setting, the setting itself otherwise (no filter without the
-    sampling period, which a filter needs)."""
-    bands = FRICTION_CANDIDATES if friction_velocity == AUTO else (friction_velocity,)
+def search_filters(velocity_filter, sampling_period):
+    """The velocity filters the inner validation compares: every candidate of ``"auto"``
+    (none without the sampling period, which a filter needs), the setting itself otherwise."""
     if velocity_filter != AUTO:
-        filters = (velocity_filter,)
-    elif sampling_period is None:
-        filters = (None,)
-    else:
-        filters = FILTER_CANDIDATES
-    return [(band, time_constant) for time_constant in filters for band in bands]
+        return (velocity_filter,)
+    if sampling_period is None:
+        return (None,)
+    return FILTER_CANDIDATES
 
 
-def friction_search(base, target, recordings, candidates, friction_of, settings):
-    """The table of the ``"auto"`` choice: every candidate's validation RMSE.
+def velocity_ladder(velocity):
+    """The widths of :data:`WIDTH_GRID` the velocity resolves and the data needs (see the
+    module's docstring); empty when no row has a non-zero finite velocity."""
+    size = np.abs(velocity[np.isfinite(velocity)])
+    size = size[size > 0]
+    if not size.size:
+        return ()
+    low, high = np.quantile(size, LADDER_QUANTILES)
+    ladder = tuple(w for w in WIDTH_GRID if 2.0 * w >= low and w <= high)
+    if not ladder:  # a velocity of one size: the band at its scale
+        ladder = (min(WIDTH_GRID, key=lambda w: abs(math.log(w / high))),)
+    return ladder
+
+
+def angle_ladder(angle, recordings):
+    """The half-widths of :data:`RADIUS_GRID` the angle resolves and the data needs (see the
+    module's docstring); empty when the angle never moves."""
+    steps = []
+    for start, stop in zip(recordings.starts, recordings.stops, strict=True):
+        steps.append(np.abs(np.diff(angle[start:stop])))
+    steps = np.concatenate(steps) if steps else np.empty(0)
+    steps = steps[np.isfinite(steps) & (steps > 0)]
+    observed = angle[np.isfinite(angle)]
+    if not steps.size:
+        return ()
+    low = np.quantile(steps, ANGLE_QUANTILES[0])
+    high = np.quantile(np.abs(observed - np.median(observed)), ANGLE_QUANTILES[1])
+    ladder = tuple(r for r in RADIUS_GRID if 2.0 * r >= low and r <= high)
+    if not ladder:  # an angle that moves less than its steps: the play at its resolution
+        ladder = (min(RADIUS_GRID, key=lambda r: abs(math.log(2.0 * r / low))),)
+    return ladder
+
+
+def basis_windows(ladder):
+    """No friction input (``None``), then every window of consecutive widths of ``ladder``,
+    fewest first: ``(friction_velocity, indices of its widths in the ladder)``."""
+    windows = [(None, ())]
+    for size in range(1, len(ladder) + 1):
+        for start in range(len(ladder) - size + 1):
+            indices = tuple(range(start, start + size))
+            windows.append((tuple(ladder[i] for i in indices), indices))
+    return windows
+
+
+def friction_search(base, target, recordings, searched, settings):
+    """The table of the ``"auto"`` choice: every candidate's validation RMSE, and the chosen.
 
     Parameters
     ----------
@@ -50,31 +138,68 @@ def friction_search(base, target, recordings, candidates, friction_of, settings)
     target : ndarray of shape (n_samples, n_outputs)
     recordings : Recordings
         The recordings of the rows, for the folds.
-    candidates : list of (float, float or None)
-        The (friction band, velocity filter) pairs (:func:`search_candidates`).
-    friction_of : callable
-        ``friction_of(band, time_constant)``: the friction input of a candidate.
+    searched : list of (float or None, list of ndarray, list of (dict, tuple of int))
+        Per velocity filter: its time constant, the friction and hysteresis columns it gives
+        (one per width) and its candidates, each the settings it stands for
+        (``friction_velocity``, ``friction_angle``) and the indices of its columns.
     settings : str
         The settings searched, for the error when the rows are too few.
 
     Returns
     -------
     table : DataFrame
-        ``friction_velocity``, ``velocity_filter``, ``validation_rmse`` and ``chosen`` (the
-        first candidate of least error, in the order of ``candidates``).
+        The settings of every candidate (``friction_velocity``: a width, a tuple of widths or
+        None; ``friction_angle``: a tuple of half-widths or None), ``velocity_filter``,
+        ``n_friction_inputs`` (friction and hysteresis inputs), ``validation_rmse`` and
+        ``chosen`` (by the rule of the module's docstring; the first of equal ones in the
+        order of ``searched``).
     """
     folds = search_folds(recordings, len(base))
-    columns = [friction_of(band, time_constant) for band, time_constant in candidates]
-    rmse = validation_rmse(base, columns, target, folds, settings)
-    best = int(np.argmin(rmse))  # the first of equal ones: the order of the candidates
-    return pd.DataFrame(
-        {
-            "friction_velocity": [float(band) for band, _ in candidates],
-            "velocity_filter": pd.Series([tc for _, tc in candidates], dtype=object),
-            "validation_rmse": rmse,
-            "chosen": np.arange(len(candidates)) == best,
-        }
+    finite = np.isfinite(base).all(axis=1) & np.isfinite(target).all(axis=1)
+    for _, columns, _ in searched:
+        for column in columns:
+            finite &= np.isfinite(column)
+    base, target, folds = _standardized(base[finite]), target[finite], folds[finite]
+    used = [fold for fold in range(SEARCH_FOLDS) if np.any(folds == fold)]
+    if len(used) < 2 or len(base) <= base.shape[1] + 2:
+        raise ValueError(
+            f"{settings}: the 'auto' choice needs rows with every input and the target "
+            f"observed in at least 2 parts of the data; got n_samples={len(base)} such rows. "
+            "Give more recordings, or fixed values."
+        )
+    rows = []
+    for time_constant, columns, candidates in searched:
+        joined = np.column_stack([base, *(column[finite] for column in columns), target])
+        products = {fold: _products(joined[folds == fold]) for fold in used}
+        total = sum(products.values())
+        n_base, n_outputs = base.shape[1], target.shape[1]
+        outputs = list(range(joined.shape[1] - n_outputs, joined.shape[1]))
+        for settings_of, indices in candidates:
+            inputs = [*range(n_base), *(n_base + i for i in indices)]
+            squared = sum(
+                _held_out_squares(total - products[fold], products[fold], inputs, outputs)
+                for fold in used
+            )
+            rmse = math.sqrt(max(squared, 0.0) / (len(base) * n_outputs))
+            rows.append((settings_of, time_constant, len(indices), rmse))
+    table = pd.DataFrame(
+        {name: pd.Series([row[0][name] for row in rows], dtype=object) for name in rows[0][0]}
     )
+    table["velocity_filter"] = pd.Series([row[1] for row in rows], dtype=object)
+    table["n_friction_inputs"] = [row[2] for row in rows]
+    table["validation_rmse"] = [row[3] for row in rows]
+    table["chosen"] = np.arange(len(table)) == choose(table)
+    return table
+
+
+def choose(table):
+    """The row of the chosen candidate: the fewest friction inputs within :data:`PARSIMONY`
+    of the least validation RMSE, then the least RMSE, then the first."""
+    rmse = table["validation_rmse"].to_numpy()
+    near = np.flatnonzero(rmse <= rmse.min() * (1.0 + PARSIMONY))
+    fewest = table["n_friction_inputs"].to_numpy()[near].min()
+    near = near[table["n_friction_inputs"].to_numpy()[near] == fewest]
+    return int(near[np.argmin(rmse[near])])  # argmin: the first of equal ones
 
 
 def search_folds(recordings, n_samples):
@@ -91,78 +216,82 @@ def search_folds(recordings, n_samples):
     return folds
 
 
-def validation_rmse(base, candidates, target, folds, settings):
-    """Held-out RMSE of a least-squares fit of ``target`` on ``base`` and each candidate
-    column, every fold left out in turn (the rows where any of them is missing left out).
-
-    One pass over the rows per fold and candidate: the fits come from the folds' sums of
-    products, the training sum being the total less the held-out fold's.
-    """
-    finite = np.isfinite(base).all(axis=1) & np.isfinite(target).all(axis=1)
-    for column in candidates:
-        finite &= np.isfinite(column)
-    base, target, folds = base[finite], target[finite], folds[finite]
-    used = [fold for fold in range(SEARCH_FOLDS) if np.any(folds == fold)]
-    if len(used) < 2 or len(base) <= base.shape[1] + 2:
-        raise ValueError(
-            f"{settings}: the 'auto' choice needs rows with every input and the target "
-            f"observed in at least 2 parts of the data; got n_samples={len(base)} such rows. "
-            "Give more recordings, or fixed values."
-        )
+def _standardized(base):
+    """A column of ones, then the columns of ``base`` centred and scaled (a constant one
+    only centred)."""
     scale = base.std(axis=0)
     scale[scale == 0] = 1.0
-    base = (base - base.mean(axis=0)) / scale
-    base = np.column_stack([np.ones(len(base)), base])
-    n_base, n_outputs = base.shape[1], target.shape[1]
-    # every fold's rows, sums of products and base and target columns, once for all candidates
-    parts = {}
-    for fold in used:
-        rows = folds == fold
-        parts[fold] = (rows, base[rows], target[rows])
-    sums = {
-        fold: _products(fold_base, fold_target)
-        for fold, (_, fold_base, fold_target) in parts.items()
-    }
-    rmse = []
-    for column in candidates:
-        column = column[finite]
-        held_out = {
-            fold: _with_column(sums[fold], fold_base, fold_target, column[rows])
-            for fold, (rows, fold_base, fold_target) in parts.items()
-        }
-        total = sum(held_out.values())
-        squared = 0.0
-        for fold in used:
-            trained = total - held_out[fold]
-            squared += _held_out_squares(trained, held_out[fold], n_base + 1)
-        rmse.append(math.sqrt(max(squared, 0.0) / (len(base) * n_outputs)))
-    return np.asarray(rmse)
+    return np.column_stack([np.ones(len(base)), (base - base.mean(axis=0)) / scale])
 
 
-def _products(base, target):
-    """Sums of products of the columns ``[base, target]`` of one fold."""
-    joined = np.column_stack([base, target])
+def _products(joined):
+    """Sums of products of the columns of one fold."""
     return joined.T @ joined
 
 
-def _with_column(products, base, target, column):
-    """The sums of products of ``[base, column, target]`` from those of ``[base, target]``."""
-    n_base = base.shape[1]
-    cross = np.concatenate([base.T @ column, [column @ column], target.T @ column])
-    size = products.shape[0] + 1
-    out = np.empty((size, size))
-    order = [*range(n_base), *range(n_base + 1, size)]  # where [base, target] go
-    out[np.ix_(order, order)] = products
-    out[n_base, :] = out[:, n_base] = cross
-    return out
+def _held_out_squares(trained, held_out, inputs, outputs):
+    """Sum of squared residuals on the held-out fold of the least-squares fit of the columns
+    ``outputs`` on the columns ``inputs``, from the sums of products of the training rows and
+    of the held-out ones, a tiny ridge keeping it solvable."""
+    gram, cross = trained[np.ix_(inputs, inputs)], trained[np.ix_(inputs, outputs)]
+    ridge = 1e-9 * np.trace(gram) / len(inputs)
+    coef = np.linalg.solve(gram + ridge * np.eye(len(inputs)), cross)
+    products, targets = held_out[np.ix_(inputs, inputs)], held_out[np.ix_(inputs, outputs)]
+    squares = held_out[np.ix_(outputs, outputs)]
+    return float(np.trace(squares - 2.0 * coef.T @ targets + coef.T @ products @ coef))
 
 
-def _held_out_squares(trained, held_out, n_inputs):
-    """Sum of squared residuals on the held-out fold of the least-squares fit on the trained
-    sums (inputs first, then the targets), a tiny ridge keeping it solvable."""
-    gram, cross = trained[:n_inputs, :n_inputs], trained[:n_inputs, n_inputs:]
-    ridge = 1e-9 * np.trace(gram) / n_inputs
-    coef = np.linalg.solve(gram + ridge * np.eye(n_inputs), cross)
-    inputs, outputs = held_out[:n_inputs, :n_inputs], held_out[:n_inputs, n_inputs:]
-    squares = held_out[n_inputs:, n_inputs:]
-    return float(np.trace(squares - 2.0 * coef.T @ outputs + coef.T @ inputs @ coef))
+def candidate_table(step, layout, values, y, positions, settings):
+    """The table of the ``"auto"`` choice of ``step`` (a ``SteeringFeatures`` in its ``fit``)
+    on rows in filter order: every candidate's validation RMSE (:func:`friction_search`), the
+    ladder of widths of ``"auto"`` read from each filter's velocity, that of the plays from
+    the angle. ``positions``: the source columns' positions in ``values``; ``settings``: the
+    settings searched, as the errors name them."""
+    target = np.asarray(y, dtype=float).reshape(len(values), -1)
+    loads = load_inputs(values, positions, step.load_columns, step.powers)
+    recordings = layout.recordings(len(values))
+    if step.friction_angle_ is None:
+        radii, plays = (), [(None, ())]
+    else:
+        angle = values[:, positions[step.angle_column]]
+        if step.friction_angle_ == AUTO:
+            radii = angle_ladder(angle, recordings)
+            plays = basis_windows(radii)
+        else:
+            radii = step.friction_angle_
+            plays = [(radii, tuple(range(len(radii))))]
+    hysteresis = list(recording_hysteresis(angle, layout, radii).values()) if radii else []
+    velocity = None
+    if step.friction_velocity is not None:
+        velocity = values[:, positions[step.friction_column]]
+    searched = []
+    for time_constant in search_filters(step.velocity_filter_, step.sampling_period_):
+        if velocity is None:
+            widths, bands = (), [(None, ())]
+        else:
+            filtered = velocity
+            if time_constant is not None:
+                filtered = filtered_velocity(velocity, layout, step.sampling_period_, time_constant)
+            if step.friction_velocity_ == AUTO:
+                widths = velocity_ladder(filtered)
+                bands = basis_windows(widths)
+            else:
+                widths = friction_widths(step.friction_velocity_)
+                bands = [(step.friction_velocity_, tuple(range(len(widths))))]
+        columns = list(friction_inputs(filtered, widths).values()) if widths else []
+        candidates = [
+            (
+                {"friction_velocity": band, "friction_angle": play},
+                (*band_columns, *(len(widths) + i for i in play_columns)),
+            )
+            for band, band_columns in bands
+            for play, play_columns in plays
+        ]
+        searched.append((time_constant, [*columns, *hysteresis], candidates))
+    return friction_search(
+        np.column_stack([values, *loads.values()]),
+        target,
+        layout.recordings(len(values)),
+        searched,
+        settings,
+    )

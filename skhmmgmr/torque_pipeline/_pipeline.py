@@ -45,9 +45,13 @@ def _n_rows(X):
 
 
 def _needs_recordings(step):
-    """Whether the step's output depends on where recordings begin (a filter over the rows,
-    or a choice of one)."""
-    if not isinstance(step, SteeringFeatures) or step.velocity_filter is None:
+    """Whether the step's output depends on where recordings begin (a filter or plays over
+    the rows, or a choice of them)."""
+    if not isinstance(step, SteeringFeatures):
+        return False
+    if step.friction_angle is not None:
+        return True
+    if step.velocity_filter is None:
         return False
     return step.velocity_filter != AUTO or step.sampling_period is not None
 
@@ -135,7 +139,8 @@ class TorquePipeline(PickleVersionMixin, Pipeline):
         if given and missing and not has_recording_index(X):
             raise ValueError(
                 f"The recordings (groups) reach the step(s) {given} but not {missing}, whose "
-                "output depends on where each recording begins (a filter over the rows): pass "
+                "output depends on where each recording begins (a filter or plays over the "
+                "rows): pass "
                 f"groups= to the pipeline itself, which hands them to every step, or give X the "
                 "recordings in its index (skhmmgmr.datasets.to_panel)."
             )
@@ -419,6 +424,7 @@ def make_torque_pipeline(
     velocity_filter="auto",
     sampling_period=None,
     output_smoothing="auto",
+    friction_angle="auto",
     **params,
 ):
     """HMM-GMR behind the steering system's derived inputs: a scikit-learn ``Pipeline``.
@@ -428,8 +434,9 @@ def make_torque_pipeline(
     package's column names (:data:`skhmmgmr.datasets.FEATURE_NAMES`); recordings reach both
     steps in the index of a panel (:func:`skhmmgmr.datasets.to_panel`), or as ``groups=`` given
     to the pipeline's ``fit``, ``predict`` and ``score`` (:class:`TorquePipeline`), with
-    metadata routing on or off. ``hmmgmr__groups=`` alone is refused with ``velocity_filter``:
-    the filter of ``SteeringFeatures`` would run across recordings. On the simulator's
+    metadata routing on or off. ``hmmgmr__groups=`` alone is refused with ``velocity_filter``
+    or ``friction_angle``: the filter or the plays of ``SteeringFeatures`` would run across
+    recordings. On the simulator's
     protocol it is more accurate than a default gradient-boosting regressor and
     smoother (see "When to use HMM-GMR" in the user guide, and
     ``benchmarks/bench_baselines.py``).
@@ -439,10 +446,14 @@ def make_torque_pipeline(
     n_states : int, default=5
         Number of hidden states of the regressor; choose it on validation recordings
         (:class:`~skhmmgmr.StateSelector`, or a ``GridSearchCV`` over ``hmmgmr__n_states``).
-    friction_velocity, load_columns, powers, velocity_filter
-        Passed to :class:`SteeringFeatures`. By default (``"auto"``) the friction band and the
-        velocity filter are chosen in ``fit`` on the training recordings
-        (``pipeline[0].friction_search_``), so that they suit the car; the filter is
+    friction_velocity, load_columns, powers, velocity_filter, friction_angle
+        Passed to :class:`SteeringFeatures`. By default (``"auto"``) the friction inputs (a
+        basis of one or several widths, from the narrowest the velocity resolves to the widest
+        the data needs, or none), the hysteresis inputs (plays on the steering-wheel angle, or
+        none) and the velocity filter are chosen in ``fit`` on the training recordings
+        (``pipeline[0].friction_search_``), so that they suit the car; a number fixes one
+        band, a tuple of widths a basis; ``friction_angle=None`` leaves out the hysteresis
+        inputs, whose plays restart at every recording. The filter is
         considered only with a sampling period (at 100 Hz it keeps the velocity sensor's
         noise out of the friction input). The recordings reach the transformer through
         ``groups`` given to the pipeline or a panel index.
@@ -482,7 +493,7 @@ def make_torque_pipeline(
         params,
         "make_torque_pipeline",
         "n_states, friction_velocity, load_columns, powers, velocity_filter, sampling_period, "
-        "output_smoothing",
+        "output_smoothing, friction_angle",
     )
     return TorquePipeline(
         [
@@ -494,6 +505,7 @@ def make_torque_pipeline(
                     powers=powers,
                     velocity_filter=velocity_filter,
                     sampling_period=sampling_period,
+                    friction_angle=friction_angle,
                 ),
             ),
             (

@@ -55,6 +55,8 @@ STEERING_PARAMS = (
     "velocity_filter",
     "sampling_period",
 )
+#: The keys of a step's hysteresis inputs, written only by a step that has them.
+HYSTERESIS_PARAMS = ("friction_angle", "angle_column")
 
 
 # --------------------------------------------------------------------------------------------
@@ -161,17 +163,20 @@ def _plain(value):
 def _fitted_param(step, key):
     """A parameter of a fitted ``SteeringFeatures``, the value chosen in place of ``"auto"``
     (or, for the sampling period, read from the training rows' time)."""
-    if key in ("friction_velocity", "velocity_filter", "sampling_period"):
+    if key in ("friction_velocity", "velocity_filter", "sampling_period", "friction_angle"):
         return getattr(step, f"{key}_")
     return getattr(step, key)
 
 
 def _steering_dict(name, step):
     names = getattr(step, "feature_names_in_", None)
+    params = {key: _plain(_fitted_param(step, key)) for key in STEERING_PARAMS}
+    if step.friction_angle_ is not None:  # the keys of the hysteresis inputs, when there are
+        params |= {key: _plain(_fitted_param(step, key)) for key in HYSTERESIS_PARAMS}
     return {
         "name": str(name),
         "type": STEERING_TYPE,
-        "params": {key: _plain(_fitted_param(step, key)) for key in STEERING_PARAMS},
+        "params": params,
         "n_features_in": int(step.n_features_in_),
         "feature_names_in": None if names is None else [str(n) for n in names],
     }

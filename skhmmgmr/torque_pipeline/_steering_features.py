@@ -4,9 +4,10 @@ scikit-learn transformer.
 Each derived input (``_derived_inputs.py``: the friction input and the signed powers of the
 load's proxies) is an ordinary named column: the transformer appends them to a data frame, so
 the selection framework keeps or drops them like any other feature. Its only learned settings
-are the ``"auto"`` ones, chosen in ``fit`` by ``_friction_search.py``, and the sampling
-period of the velocity filter, read from the time index of the training recordings when it
-is not given.
+are the ``"auto"`` ones (the friction inputs, one band or a basis of several, and the
+velocity filter), chosen in ``fit`` by ``_friction_search.py``, and the sampling period of
+the velocity filter, read from the time index of the training recordings when it is not
+given.
 """
 
 import numbers
@@ -22,37 +23,62 @@ from .._core._panel import in_filter_order
 from .._core._pickled import PickleVersionMixin
 from .._core._sequences import median_time_step
 from ._derived_inputs import (
-    FRICTION_NAME,
+    check_widths,
     derived_names,
     derived_units,
     filter_decay,
     filtered_velocity,
-    friction_input,
+    friction_inputs,
+    friction_names,
+    friction_widths,
+    hysteresis_names,
     load_inputs,
+    recording_hysteresis,
 )
-from ._friction_search import AUTO, friction_search, search_candidates
+from ._friction_search import AUTO, RADIUS_GRID, WIDTH_GRID, candidate_table
 
 
 @fill_shared_parameters
 class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     """Append the friction and load-compression inputs of a power-assisted steering system.
 
-    Only the ``"auto"`` settings are learned: ``fit`` chooses the friction band and the
-    velocity filter on the target by a grouped inner validation (see ``friction_search_``
-    and the user guide). Without a velocity filter the transform is row by row, so it is
-    causal and streams: the same row always gives the same derived inputs. With it, the
-    friction input reads the velocity through a causal first-order filter that restarts at
+    Only the ``"auto"`` settings are learned: ``fit`` chooses the friction inputs (no band, one
+    band or a basis of several, their widths read from the velocity's own scale), the
+    hysteresis inputs and the velocity filter on the target by a grouped inner validation (see
+    ``friction_search_`` and the user guide). Without a velocity filter and hysteresis inputs
+    the transform is row by row, so it is causal and streams: the same row always gives the
+    same derived inputs. With them, the friction inputs read the velocity through a causal
+    first-order filter, and the hysteresis inputs the angle through plays, both restarted at
     every recording (the recordings come from ``groups`` or from the index of a panel,
     :func:`skhmmgmr.datasets.to_panel`; without either, the rows form one recording in time
     order). Missing values (NaN) stay missing.
 
     Parameters
     ----------
-    friction_velocity : float, "auto" or None, default=0.1
+    friction_velocity : float, tuple of float, "auto" or None, default=0.1
         Steering-wheel velocity [rad/s] over which Coulomb friction changes sign; the derived
-        input ``steering_friction`` is ``tanh(velocity / friction_velocity)``. ``"auto"``: the
-        band of 0.025, 0.05, 0.1, 0.2, 0.4 and 0.8 rad/s (``FRICTION_CANDIDATES``) of least
-        held-out error, chosen in ``fit`` (which then needs ``y``). ``None`` adds no friction input.
+        input ``steering_friction`` is ``tanh(velocity / friction_velocity)``. A tuple of
+        widths ``w_j`` is a basis of friction inputs ``tanh(velocity / w_j)``, named
+        ``steering_friction_<w_j>`` (``w_j`` to three significant digits), whose combination
+        each state's regression fits: a friction curve of any sharpness within the widths.
+        ``"auto"``: chosen in ``fit`` (which then needs ``y``) by the held-out error of a
+        least-squares fit, among no friction input and every run of consecutive widths of a
+        ladder a factor 2 apart, from the narrowest the (filtered) velocity resolves to the
+        widest the data needs (``_friction_search.py``; the fewest inputs within 0.2 % of the
+        least error); one width chosen is the tuple of that width. ``None`` adds no friction
+        input.
+    friction_angle : float, tuple of float, "auto" or None, default=None
+        Half-widths ``r`` [rad] of plays on the steering-wheel angle: the hysteresis inputs
+        ``steering_hysteresis_<r> = (angle - p) / r`` in [-1, 1], the play ``p`` following the
+        angle at most ``r`` behind it (``p_t = clip(p_(t-1), angle_t - r, angle_t + r)``,
+        started at each recording's first observed angle): the angle turned since the last
+        reversal, over which a column whose friction sticks twists before it slips (the
+        hysteresis of torque against angle). ``"auto"``: chosen in ``fit`` with the friction
+        inputs, among none and every run of consecutive half-widths of a ladder a factor 2
+        apart from the angle's resolution up to the angle's excursions (``_friction_search.py``).
+        A missing angle gives missing hysteresis inputs and leaves the plays alone.
+    angle_column : str or int, default="steering_wheel_angle"
+        The column holding the steering-wheel angle, for ``friction_angle``.
     friction_column : str or int, default="steering_wheel_velocity"
         The column holding the steering-wheel velocity (a name, or a position for arrays).
     load_columns : tuple of str or int, default=("steering_wheel_angle", "lateral_acceleration")
@@ -65,8 +91,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         friction input (0.02 s suits 100 Hz sensors; at 20 Hz it changes little). ``None``
         filters nothing. A time constant needs the sampling period (``sampling_period``, or
         the time index of the training rows). ``"auto"``: none, 0.02 or 0.05 s
-        (``FILTER_CANDIDATES``), chosen in ``fit`` with the friction band (no filter without
-        a sampling period). The filter starts at the first observed
+        (``FILTER_CANDIDATES``), chosen in ``fit`` with the friction inputs (no filter without
+        a sampling period; none with no friction input). The filter starts at the first observed
         velocity of each recording (its output equals it there); a missing velocity gives a
         missing friction input and leaves the filter's state alone, and the next observed
         velocity is taken in over the whole time since the last one.
@@ -78,18 +104,23 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
 
     Attributes
     ----------
-    friction_velocity_ : float or None
-        The friction band the transform uses: ``friction_velocity``, or the one chosen.
+    friction_velocity_ : float, tuple of float or None
+        The friction band or basis widths the transform uses: ``friction_velocity``, or the
+        ones chosen (a tuple, ``None`` for no friction input).
+    friction_angle_ : tuple of float or None
+        The plays' half-widths the transform uses: ``friction_angle`` (one number as a tuple of
+        one), or the ones chosen (``None``: no hysteresis input).
     velocity_filter_ : float or None
         The velocity filter's time constant the transform uses (``None``: no filter).
     sampling_period_ : float or None
         The seconds between two rows the velocity filter uses: ``sampling_period``, or the
         one read from the time index in ``fit`` (``None``: unknown).
     friction_search_ : DataFrame or None
-        The ``"auto"`` choice: one row per candidate, with ``friction_velocity``,
-        ``velocity_filter``, ``validation_rmse`` (held-out root mean squared error of the
-        linear fit, in the target's unit) and ``chosen``; ``None`` without an ``"auto"``
-        setting.
+        The ``"auto"`` choice: one row per candidate, with ``friction_velocity`` (a width, a
+        tuple of widths or None), ``friction_angle`` (a tuple of half-widths or None),
+        ``velocity_filter``, ``n_friction_inputs`` (friction and hysteresis inputs),
+        ``validation_rmse`` (held-out root mean squared error of the linear fit, in the
+        target's unit) and ``chosen``; ``None`` without an ``"auto"`` setting.
     n_features_in_ : int
         Number of input columns.
     feature_names_in_ : ndarray of shape (n_features,)
@@ -113,6 +144,12 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     >>> derived["lateral_acceleration_signed_square"].tolist()
     [1.0, -4.0]
 
+    A basis of friction widths:
+
+    >>> basis = SteeringFeatures(friction_velocity=(0.01, 0.1)).fit_transform(X)
+    >>> list(basis.columns[3:5])
+    ['steering_friction_0.01', 'steering_friction_0.1']
+
     With ``"auto"`` (the default of :func:`make_torque_pipeline`) ``fit`` chooses them on the
     torque:
 
@@ -121,16 +158,26 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     >>> step = SteeringFeatures(friction_velocity="auto", velocity_filter="auto")
     >>> step = step.fit(data[list(FEATURE_NAMES)], data["driver_torque"])
     >>> step.friction_velocity_, step.velocity_filter_
-    (0.1, None)
+    ((0.1,), None)
     """
 
     _parameter_constraints = {
         "friction_velocity": [
             Interval(numbers.Real, 0, None, closed="neither"),
             StrOptions({AUTO}),
+            tuple,
+            list,
             None,
         ],
         "friction_column": [str, Interval(numbers.Integral, 0, None, closed="left")],
+        "friction_angle": [
+            Interval(numbers.Real, 0, None, closed="neither"),
+            StrOptions({AUTO}),
+            tuple,
+            list,
+            None,
+        ],
+        "angle_column": [str, Interval(numbers.Integral, 0, None, closed="left")],
         "load_columns": [tuple, list],
         "powers": [tuple, list],
         "velocity_filter": [
@@ -149,6 +196,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         powers=(2, 3),
         velocity_filter=None,
         sampling_period=None,
+        friction_angle=None,
+        angle_column="steering_wheel_angle",
     ):
         self.friction_velocity = friction_velocity
         self.friction_column = friction_column
@@ -156,6 +205,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         self.powers = powers
         self.velocity_filter = velocity_filter
         self.sampling_period = sampling_period
+        self.friction_angle = friction_angle
+        self.angle_column = angle_column
 
     __metadata_request__fit = {"groups": True}
     __metadata_request__transform = {"groups": True}
@@ -164,6 +215,10 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         # a step pickled before sampling_period_ existed filtered with sampling_period
         if "n_features_in_" in state and "sampling_period_" not in state:
             state = {**state, "sampling_period_": state.get("sampling_period")}
+        # one pickled before the hysteresis inputs existed had none
+        state = {"friction_angle": None, "angle_column": "steering_wheel_angle", **state}
+        if "n_features_in_" in state and "friction_angle_" not in state:
+            state["friction_angle_"] = None
         super().__setstate__(state)
 
     @_fit_context(prefer_skip_nested_validation=True)
@@ -179,8 +234,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             otherwise.
         groups : array-like of shape (n_samples,), default=None
             Recording id of every row: the folds of the ``"auto"`` choice are whole
-            recordings, and the velocity filter restarts at each. ``None``: the index's
-            recording level if any, else one recording.
+            recordings, and the velocity filter and the plays restart at each. ``None``: the
+            index's recording level if any, else one recording.
 
         Returns
         -------
@@ -189,12 +244,13 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         """
         self._check_parameters()
         values = validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
+        self.friction_velocity_ = _as_setting(self.friction_velocity)
+        self.friction_angle_ = _as_radii(self.friction_angle)
         self._check_inputs()
-        self.friction_velocity_ = self.friction_velocity
         self.velocity_filter_ = None if self.friction_velocity is None else self.velocity_filter
         self.sampling_period_ = self.sampling_period
         self.friction_search_ = None
-        searched = AUTO in (self.friction_velocity_, self.velocity_filter_)
+        searched = AUTO in (self.friction_velocity_, self.velocity_filter_, self.friction_angle_)
         if searched and y is None:
             raise ValueError(
                 f"{self._settings()}: an 'auto' setting is chosen on the target, so fit needs "
@@ -219,48 +275,26 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
                     "seconds between two rows), or X with a 'time' index level to read it "
                     "from; got sampling_period=None."
                 )
-        if AUTO not in (self.friction_velocity_, self.velocity_filter_):
+        if AUTO not in (self.friction_velocity_, self.velocity_filter_, self.friction_angle_):
             return
-        self.friction_search_ = self._search(layout, values, y)
+        self.friction_search_ = candidate_table(
+            self, layout, values, y, self._sources(), self._settings()
+        )
         chosen = self.friction_search_[self.friction_search_["chosen"]].iloc[0]
-        self.friction_velocity_ = float(chosen["friction_velocity"])
+        self.friction_velocity_ = _as_setting(chosen["friction_velocity"])
+        self.friction_angle_ = _as_radii(chosen["friction_angle"])
         self.velocity_filter_ = chosen["velocity_filter"]
-        if self.velocity_filter_ is not None:
+        if self.friction_velocity_ is None:
+            self.velocity_filter_ = None
+        elif self.velocity_filter_ is not None:
             self.velocity_filter_ = float(self.velocity_filter_)
-
-    def _search(self, layout, values, y):
-        """The table of the ``"auto"`` choice on rows in filter order: every candidate's
-        validation RMSE (``_friction_search.py``)."""
-        target = np.asarray(y, dtype=float).reshape(len(values), -1)
-        positions = self._sources()
-        loads = load_inputs(values, positions, self.load_columns, self.powers)
-        velocity = values[:, positions[self.friction_column]]
-        velocities = {None: velocity}
-
-        def friction_of(band, time_constant):
-            if time_constant not in velocities:
-                velocities[time_constant] = filtered_velocity(
-                    velocity, layout, self.sampling_period_, time_constant
-                )
-            return friction_input(velocities[time_constant], band)
-
-        candidates = search_candidates(
-            self.friction_velocity, self.velocity_filter, self.sampling_period_
-        )
-        return friction_search(
-            np.column_stack([values, *loads.values()]),
-            target,
-            layout.recordings(len(values)),
-            candidates,
-            friction_of,
-            self._settings(),
-        )
 
     def _settings(self):
         """The settings searched, as the errors name them."""
         return (
             f"friction_velocity={self.friction_velocity!r}, "
-            f"velocity_filter={self.velocity_filter!r}"
+            f"velocity_filter={self.velocity_filter!r}, "
+            f"friction_angle={self.friction_angle!r}"
         )
 
     def _check_parameters(self):
@@ -275,6 +309,10 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             raise ValueError(f"powers={self.powers!r} repeats a power.")
         if len(set(self.load_columns)) != len(self.load_columns):
             raise ValueError(f"load_columns={self.load_columns!r} repeats a column.")
+        if isinstance(self.friction_velocity, tuple | list):
+            check_widths(self.friction_velocity, "friction_velocity", friction_names)
+        if isinstance(self.friction_angle, tuple | list):
+            check_widths(self.friction_angle, "friction_angle", hysteresis_names)
 
     def _check_inputs(self):
         """The fitted inputs hold the source columns and none of the derived ones."""
@@ -285,7 +323,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             raise ValueError(
                 f"X already has the column(s) {taken}, which SteeringFeatures derives: rename "
                 "them, or leave their source out (friction_velocity=None for the friction "
-                "input, load_columns or powers for the others)."
+                "input, friction_angle=None for the hysteresis inputs, load_columns or powers "
+                "for the others)."
             )
 
     def fit_transform(self, X, y=None, groups=None):
@@ -298,7 +337,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         y : array-like of shape (n_samples,) or (n_samples, n_outputs), default=None
             The target, for an ``"auto"`` setting (see :meth:`fit`).
         groups : array-like of shape (n_samples,), default=None
-            Recording id of every row, for ``velocity_filter`` and the ``"auto"`` choice.
+            Recording id of every row, for ``velocity_filter``, ``friction_angle`` and the
+            ``"auto"`` choice.
 
         Returns
         -------
@@ -315,8 +355,9 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         X : DataFrame or array-like of shape (n_samples, n_features)
             The columns seen in :meth:`fit`.
         groups : array-like of shape (n_samples,), default=None
-            Recording id of every row, for ``velocity_filter`` (the filter restarts at every
-            recording; the rows of a recording contiguous and in time order, unless the
+            Recording id of every row, for ``velocity_filter`` and ``friction_angle`` (the
+            filter and the plays restart at every recording; the rows of a recording
+            contiguous and in time order, unless the
             index of a panel orders them). ``None``: the index's recording level if any,
             else one recording.
 
@@ -335,13 +376,17 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         values = validate_data(self, X, ensure_all_finite="allow-nan", reset=False)
         positions = self._sources()
         derived = {}
-        if self.friction_velocity is not None:
+        if self.friction_velocity_ is not None:
             velocity = values[:, positions[self.friction_column]]
             if self.velocity_filter_ is not None:
                 velocity = in_filter_order(
                     self._filter_in_filter_order, X, groups, rows={"velocity": velocity}
                 )
-            derived[FRICTION_NAME] = friction_input(velocity, self.friction_velocity_)
+            derived.update(friction_inputs(velocity, self.friction_velocity_))
+        if self.friction_angle_ is not None:
+            angle = values[:, positions[self.angle_column]]
+            plays = in_filter_order(self._play_in_filter_order, X, groups, rows={"angle": angle})
+            derived.update(zip(hysteresis_names(self.friction_angle_), plays.T, strict=True))
         derived.update(load_inputs(values, positions, self.load_columns, self.powers))
         if frame is None:
             return np.column_stack([values, *derived.values()])
@@ -349,9 +394,10 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         out = pd.concat([frame, out], axis=1)
         units = derived_units(
             frame.attrs.get("units"),
-            self.friction_velocity is not None,
+            self.friction_velocity_,
             self.load_columns,
             self.powers,
+            self.friction_angle_,
         )
         out.attrs = {**frame.attrs, "units": units}
         if units is None:
@@ -361,6 +407,11 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     def _filter_in_filter_order(self, layout, X, velocity):
         """The velocity of rows in filter order through the fitted velocity filter."""
         return filtered_velocity(velocity, layout, self.sampling_period_, self.velocity_filter_)
+
+    def _play_in_filter_order(self, layout, X, angle):
+        """The hysteresis inputs of rows in filter order, one column per play."""
+        plays = recording_hysteresis(angle, layout, self.friction_angle_)
+        return np.column_stack(list(plays.values()))
 
     def get_feature_names_out(self, input_features=None):
         """Input names followed by the derived inputs' names.
@@ -398,9 +449,12 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         settings : dict
             ``n_features_in`` and ``feature_names_in`` (``None`` without names) of the input
             rows, ``feature_names_out``; ``friction_position`` (the velocity's position in the
-            row, ``None`` without a friction input), ``friction_velocity``; ``filter_decay``,
+            row, ``None`` without a friction input), ``friction_velocity`` (the band, or the
+            list of a basis' widths, one friction input each); ``filter_decay``,
             the velocity filter's factor per row ``exp(-sampling_period / velocity_filter)``
             (``None`` without the filter), and ``sampling_period`` (``sampling_period_``);
+            ``angle_position`` (the angle's position in the row, ``None`` without hysteresis
+            inputs) and ``friction_angle`` (the list of the plays' half-widths);
             ``load_positions`` (the load columns' positions) and ``powers``.
 
         Examples
@@ -418,30 +472,44 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         check_is_fitted(self, "n_features_in_")
         positions = self._sources()
         names = getattr(self, "feature_names_in_", None)
-        friction = self.friction_velocity is not None
-        filtered = friction and self.velocity_filter_ is not None
+        friction, radii = self.friction_velocity_, self.friction_angle_
+        filtered = friction is not None and self.velocity_filter_ is not None
+        if isinstance(friction, tuple):
+            friction = list(friction_widths(friction))
+        elif friction is not None:
+            friction = float(friction)
         return {
             "n_features_in": int(self.n_features_in_),
             "feature_names_in": None if names is None else [str(name) for name in names],
             "feature_names_out": [str(name) for name in self.get_feature_names_out()],
-            "friction_position": positions[self.friction_column] if friction else None,
-            "friction_velocity": float(self.friction_velocity_) if friction else None,
+            "friction_position": None if friction is None else positions[self.friction_column],
+            "friction_velocity": friction,
             "filter_decay": (
                 filter_decay(self.sampling_period_, self.velocity_filter_) if filtered else None
             ),
             "sampling_period": None
             if self.sampling_period_ is None
             else float(self.sampling_period_),
+            "angle_position": None if radii is None else positions[self.angle_column],
+            "friction_angle": None if radii is None else [float(r) for r in radii],
             "load_positions": [positions[column] for column in self.load_columns],
             "powers": [int(power) for power in self.powers],
         }
 
     def _derived_names(self):
-        return derived_names(self.friction_velocity is not None, self.load_columns, self.powers)
+        """The derived inputs' names; before an ``"auto"`` choice, every name it may give."""
+        friction, radii = self.friction_velocity_, self.friction_angle_
+        if isinstance(friction, str):  # "auto": a basis of widths of the grid
+            friction = WIDTH_GRID
+        if isinstance(radii, str):
+            radii = RADIUS_GRID
+        return derived_names(friction, self.load_columns, self.powers, radii)
 
     def _sources(self):
         """Position of every source column, with an error naming the missing ones."""
         needed = list(self.load_columns)
+        if self.friction_angle is not None:
+            needed.insert(0, self.angle_column)
         if self.friction_velocity is not None:
             needed.insert(0, self.friction_column)
         names = getattr(self, "feature_names_in_", None)
@@ -466,7 +534,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             )
             raise ValueError(
                 f"SteeringFeatures needs the column(s) {missing} (friction_column / "
-                f"load_columns); {where}."
+                f"angle_column / load_columns); {where}."
             )
         return positions
 
@@ -487,8 +555,8 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
         caller_name="SteeringFeatures",
     )
     step._check_parameters()
-    for name in ("friction_velocity", "velocity_filter"):
-        if params.get(name) == AUTO:
+    for name in ("friction_velocity", "velocity_filter", "friction_angle"):
+        if isinstance(params.get(name), str) and params[name] == AUTO:
             raise ValueError(
                 f"{name}='auto' is a setting to fit; a fitted step holds the chosen value."
             )
@@ -497,7 +565,8 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
             f"velocity_filter={step.velocity_filter!r} needs sampling_period (the seconds "
             "between two rows); got sampling_period=None."
         )
-    step.friction_velocity_ = step.friction_velocity
+    step.friction_velocity_ = _as_setting(step.friction_velocity)
+    step.friction_angle_ = _as_radii(step.friction_angle)
     step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
     step.sampling_period_ = step.sampling_period
     step.friction_search_ = None
@@ -506,3 +575,19 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
         step.feature_names_in_ = np.asarray(feature_names_in, dtype=object)
     step._check_inputs()
     return step
+
+
+def _as_setting(friction):
+    """A ``friction_velocity`` as the fitted step holds it: a basis as a tuple of floats."""
+    if isinstance(friction, tuple | list):
+        return friction_widths(friction)
+    return friction
+
+
+def _as_radii(radii):
+    """A ``friction_angle`` as the fitted step holds it: a tuple of floats (or None, "auto")."""
+    if isinstance(radii, tuple | list):
+        return tuple(float(r) for r in radii)
+    if radii is None or isinstance(radii, str):
+        return radii
+    return (float(radii),)

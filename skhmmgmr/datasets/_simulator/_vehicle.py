@@ -214,17 +214,19 @@ def single_track(vehicle, speed):
     return rates
 
 
-#: What :func:`draw_vehicle` draws, uniformly within ``(low, high)``: parameter name of
+#: What :func:`draw_vehicle` draws within ``(low, high)``, uniformly (the parameters of
+#: :data:`LOG_UNIFORM`: uniformly in their logarithm): parameter name of
 #: :class:`VehicleParameters` -> ``(low, high, unit, meaning)``. Every range holds the default
 #: car's value but ``column_stiffness`` (the default column is rigid, a drawn car has a
 #: torsion bar). The other parameters (mass, tyres, roll...) stay the default car's.
 VEHICLE_RANGES = {
     "wheel_friction": (0.1, 0.8, "Nm", "Coulomb friction of the steering system at the wheel"),
     "friction_velocity": (
-        0.03,
+        0.002,
         0.3,
         "rad/s",
-        "steering-wheel velocity over which the friction changes sign (its band)",
+        "steering-wheel velocity over which the friction changes sign (its band; from the "
+        "sharp friction of a column that sticks to a smooth one)",
     ),
     "assist_gain": (0.1, 1.0, "-", "power-assist boost at zero torque (g_0)"),
     "assist_gain_slope": (0.05, 0.4, "1/Nm", "growth of the boost with the torque (g_1)"),
@@ -244,14 +246,20 @@ VEHICLE_RANGES = {
     ),
     "column_damping": (0.05, 0.3, "Nms/rad", "damping of the torsion bar's twist"),
 }
+#: The parameters of :data:`VEHICLE_RANGES` drawn uniformly in their logarithm: a range over
+#: two orders of magnitude, of which a uniform draw would nearly never give the low end (a
+#: friction band of 5 mrad/s or less: one car in a hundred instead of about one in five).
+LOG_UNIFORM = frozenset({"friction_velocity"})
 
 
 @validate_params({"random_state": ["random_state"]}, prefer_skip_nested_validation=True)
 def draw_vehicle(random_state=None):
     """Draw a car's steering system and sensors within :data:`VEHICLE_RANGES`.
 
-    Every parameter of :data:`VEHICLE_RANGES` is drawn uniformly within its range, in the
-    order of the mapping; the others are the default car's (:class:`VehicleParameters`).
+    Every parameter of :data:`VEHICLE_RANGES` is drawn uniformly within its range (the
+    friction band uniformly in its logarithm, :data:`LOG_UNIFORM`: 0.002 to 0.3 rad/s, a
+    band of 5 mrad/s or less in one car of five), one draw each in the order of the
+    mapping; the others are the default car's (:class:`VehicleParameters`).
     ``vehicle=seed`` in the simulator draws the car with ``draw_vehicle(seed)``.
 
     Parameters
@@ -272,9 +280,12 @@ def draw_vehicle(random_state=None):
     (True, 'Nm')
     """
     rng = check_random_state(random_state)
-    drawn = {
-        name: float(rng.uniform(low, high)) for name, (low, high, *_) in VEHICLE_RANGES.items()
-    }
+    drawn = {}
+    for name, (low, high, *_) in VEHICLE_RANGES.items():
+        if name in LOG_UNIFORM:
+            drawn[name] = float(math.exp(rng.uniform(math.log(low), math.log(high))))
+        else:
+            drawn[name] = float(rng.uniform(low, high))
     return replace(VehicleParameters(), **drawn)
 
 
