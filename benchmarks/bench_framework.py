@@ -11,7 +11,13 @@ validation recordings (504,000 and 252,000 rows), 18 measured features.
    covariance, same start and tolerance), timed on a sample of subsets of the top 10 (two per
    size) next to the package on the same subsets, then extrapolated to all 1023 subsets and
    divided by ``n_jobs``.
-3. **Slow reference path**: the same framework with :class:`_reference.ReferenceHMMGMR`, an EM
+3. **Fast and full search side by side** (``--searches``): the framework with
+   ``search="full"`` (every model from its own k-means start until EM converges) and
+   ``search="fast"`` on the same data, per seed, one after the other in one run: wall time per
+   stage and their ratio, the EM fits of every stage (full fits, and screened models with
+   their few EM iterations), and every selection compared (subset, K, the candidate subsets
+   of every trade-off, the K of every trade-off, test accuracy and smoothness).
+4. **Slow reference path**: the same framework with :class:`_reference.ReferenceHMMGMR`, an EM
    built from sklearn.mixture's densities and hmmlearn's recursions (k-means on all rows), and
    a comparison of every selection: per-recording best subsets, relevance, candidates, the
    chosen subset and K.
@@ -20,6 +26,8 @@ Run::
 
     python benchmarks/bench_framework.py                   # all three, about 45 minutes
     python benchmarks/bench_framework.py --skip-reference  # fast path and peer, ~10 minutes
+    python benchmarks/bench_framework.py --searches --seeds 0 1 2   # search="fast" vs "full"
+    python benchmarks/bench_framework.py --searches --drivers 3 --duration 60   # a quick look
 """
 
 import argparse
@@ -41,6 +49,8 @@ from threadpoolctl import threadpool_limits
 from skhmmgmr import HMMGMRRegressor, select_parameters
 from skhmmgmr._core._schema import TARGET
 from skhmmgmr.metrics import evaluate_recordings
+from skhmmgmr.selection import candidate_subsets
+from skhmmgmr.selection._search import _screening
 from skhmmgmr.selection._search._score_tables import best_per_recording, rescore_table
 
 DEFAULT_CACHE = os.path.join(os.path.expanduser("~"), ".cache", "skhmmgmr-benchmarks")
@@ -58,12 +68,18 @@ def load_protocol(n_drivers, cache, duration=300.0):
     return data
 
 
-def run_framework(data, estimator, n_jobs, label, save=None):
+def run_framework(data, estimator, n_jobs, label, save=None, search="full"):
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         report = select_parameters(
-            data, n_top=10, k_max=20, n_jobs=n_jobs, progress=False, estimator=estimator
+            data,
+            n_top=10,
+            k_max=20,
+            n_jobs=n_jobs,
+            progress=False,
+            estimator=estimator,
+            search=search,
         )
     wall = time.perf_counter() - start
     stages = ", ".join(f"{name} {seconds:.0f} s" for name, seconds in report.timings.items())
@@ -75,6 +91,152 @@ def run_framework(data, estimator, n_jobs, label, save=None):
         report_tables["wall_s"] = wall
         joblib.dump(report_tables, os.path.join(save, f"{label.replace(' ', '_')}.joblib"))
     return report, wall
+
+
+def _fits(table, keys, refitted=None):
+    """``(full fits, screened models)`` of a stage's table: one model per ``keys`` and
+    split, screened when the fast search marked it so; ``refitted`` keeps the models (by
+    their first key) the stage fitted itself (not read from another stage)."""
+    models = table.drop_duplicates([*keys, "fold"])
+    if refitted is not None:
+        models = models[models[keys[0]].map(_canonical).isin(refitted)]
+    if "screened" not in models:
+        return len(models), 0
+    screened = models["screened"].astype(bool)
+    return int((~screened).sum()), int(screened.sum())
+
+
+def em_fits(report):
+    """EM fits per stage of a framework run: ``{stage: (full fits, screened models)}``.
+
+    The exhaustive wrapper's models are in its table; the forward wrapper refits only the
+    subsets the exhaustive one did not evaluate; the fast search adds, per split, one joint
+    model over all the forward wrapper's columns when that subset is not on its paths (the
+    exhaustive wrapper's joint model is its all-top subset); the state sweep fits every K;
+    the candidates, the final and the baseline model are fitted in full by both paths.
+    """
+    tables = report.source_tables
+    exhaustive, forward = tables["exhaustive_results"], tables["forward_results"]
+    seen = set(exhaustive["subset"].map(_canonical))
+    new = set(forward["subset"].map(_canonical)) - seen
+    counts = {
+        "exhaustive": _fits(exhaustive, ["subset"]),
+        "forward": _fits(forward, ["subset"], refitted=new),
+        "states": _fits(report.states, ["n_states"]),
+    }
+    n_folds = forward["fold"].nunique()
+    everything = _canonical(report.filter["feature"])
+    if "screened" in forward and everything not in set(forward["subset"].map(_canonical)):
+        full, screened = counts["forward"]
+        counts["forward"] = (full + n_folds, screened)
+    candidates = report.candidates[~report.candidates["empty"].astype(bool)]
+    counts["candidates, final, baseline"] = (len(candidates) * n_folds + 2, 0)
+    return counts
+
+
+def _candidates_per_trade_off(report):
+    """The candidate subsets of every trade-off (not only the framework's): ``{(trade-off,
+    name): features}`` from the report's relevance counts."""
+    n_recordings = report.states["recording"].nunique()
+    sources = [s for s in report.relevance.index.unique(0) if s != "combined"]
+    subsets = {}
+    for label in report.relevance.columns:
+        relevance = {}
+        for source in sources:
+            relevance[source] = report.relevance.loc[source]
+            relevance[source].attrs["n_recordings"] = n_recordings
+        table = candidate_subsets(relevance, label)
+        for name, features in zip(table["name"], table["features"], strict=True):
+            subsets[label, name] = _canonical(features)
+    return subsets
+
+
+def compare_searches(full, fast):
+    """The answers of the two searches side by side; returns a dict of differences."""
+    subsets = _candidates_per_trade_off(full), _candidates_per_trade_off(fast)
+    differing = {
+        key: sorted(set(subsets[0][key]) ^ set(subsets[1][key]))
+        for key in subsets[0]
+        if subsets[0][key] != subsets[1].get(key)
+    }
+    choices = [r.state_choices.set_index("trade_off")["n_states"] for r in (full, fast)]
+    k_differing = {t: (int(choices[0][t]), int(choices[1][t])) for t in choices[0].index}
+    k_differing = {t: ks for t, ks in k_differing.items() if ks[0] != ks[1]}
+    tests = [r.test_summary.set_index("model").loc["final"] for r in (full, fast)]
+    accuracy_gap = float(tests[1]["accuracy"] - tests[0]["accuracy"])
+    smoothness_gap = float(tests[1]["smoothness"] / tests[0]["smoothness"] - 1.0)
+    result = {
+        "same_subset": _canonical(full.features) == _canonical(fast.features),
+        "same_n_states": int(full.n_states) == int(fast.n_states),
+        "subset_full": tuple(full.features),
+        "subset_fast": tuple(fast.features),
+        "n_states": (int(full.n_states), int(fast.n_states)),
+        "candidates_differing": differing,
+        "n_candidates": len(subsets[0]),
+        "k_differing": k_differing,
+        "test_accuracy": (float(tests[0]["accuracy"]), float(tests[1]["accuracy"])),
+        "test_smoothness": (float(tests[0]["smoothness"]), float(tests[1]["smoothness"])),
+        "accuracy_gap_points": accuracy_gap,
+        "smoothness_gap_share": smoothness_gap,
+        "within_tolerance": abs(accuracy_gap) <= 0.1 and abs(smoothness_gap) <= 0.01,
+    }
+    print(
+        f"  same subset: {result['same_subset']}; K full/fast {result['n_states']}; candidate "
+        f"subsets differing: {len(differing)} of {len(subsets[0])} (trade-off x candidate); "
+        f"K per trade-off differing: {k_differing or 'none'}"
+    )
+    if not result["same_subset"]:
+        print(f"    full: {', '.join(full.features)}")
+        print(f"    fast: {', '.join(fast.features)}")
+    for key, features in differing.items():
+        print(f"    {key[0]} {key[1]}: {', '.join(features)} in one path only")
+    print(
+        f"  test, final model: accuracy full/fast {tests[0]['accuracy']:.2f}/"
+        f"{tests[1]['accuracy']:.2f} % ({accuracy_gap:+.2f} pt), smoothness "
+        f"{tests[0]['smoothness']:.3f}/{tests[1]['smoothness']:.3f} Nm/s "
+        f"({smoothness_gap:+.1%}); within 0.1 pt / 1 %: {result['within_tolerance']}"
+    )
+    return result
+
+
+def run_searches(seeds, *, n_drivers, duration, n_jobs, cache, save=None):
+    """``search="full"`` and ``search="fast"`` side by side on the data of every seed."""
+    results = {}
+    for seed in seeds:
+        data = thesis_protocol(n_drivers, duration=duration, seed=seed, cache=cache)
+        print(f"seed {seed}: {n_drivers} drivers (seeds {data.attrs['seeds']}), {len(data):,} rows")
+        reports, walls = {}, {}
+        for search in ("full", "fast"):
+            label = f"{search} search seed {seed}"
+            estimator = HMMGMRRegressor(random_state=0)
+            reports[search], walls[search] = run_framework(
+                data, estimator, n_jobs, label, save, search=search
+            )
+        full, fast = reports["full"], reports["fast"]
+        print(f"  ratio full/fast: {walls['full'] / walls['fast']:.2f}x")
+        for stage in full.timings:
+            print(
+                f"    {stage:<26} full {full.timings[stage]:6.0f} s  fast "
+                f"{fast.timings[stage]:6.0f} s  ratio "
+                f"{full.timings[stage] / max(fast.timings[stage], 1e-9):5.2f}x"
+            )
+        fits = {search: em_fits(report) for search, report in reports.items()}
+        print(
+            f"  EM fits per stage, full fits + screened models (screened: "
+            f"{_screening.SUBSET_ITERATIONS} EM iterations per subset, "
+            f"{_screening.STATE_ITERATIONS} after each split of a state):"
+        )
+        for stage in fits["full"]:
+            (a, b), (c, d) = fits["full"][stage], fits["fast"][stage]
+            print(f"    {stage:<26} full {a:5d} + {b:4d}   fast {c:5d} + {d:4d}")
+        results[seed] = {
+            "wall_s": walls,
+            "ratio": walls["full"] / walls["fast"],
+            "stages_s": {search: report.timings for search, report in reports.items()},
+            "em_fits": fits,
+            "comparison": compare_searches(full, fast),
+        }
+    return results
 
 
 def load_tables(path):
@@ -279,6 +441,12 @@ def main(argv=None):
     parser.add_argument("--n-jobs", type=int, default=2)
     parser.add_argument("--duration", type=float, default=300.0, help="seconds per section")
     parser.add_argument("--cache", default=DEFAULT_CACHE, help="simulator cache directory")
+    parser.add_argument(
+        "--searches",
+        action="store_true",
+        help='only search="full" against search="fast", side by side per seed',
+    )
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="with --searches")
     parser.add_argument("--skip-reference", action="store_true")
     parser.add_argument("--skip-peer", action="store_true")
     parser.add_argument("--save", default=None, help="directory for the selection tables")
@@ -288,6 +456,15 @@ def main(argv=None):
         help="compare with the saved tables of an earlier reference run instead of running it",
     )
     args = parser.parse_args(argv)
+    if args.searches:
+        return run_searches(
+            args.seeds,
+            n_drivers=args.drivers,
+            duration=args.duration,
+            n_jobs=args.n_jobs,
+            cache=args.cache,
+            save=args.save,
+        )
     return run(
         args.drivers,
         n_jobs=args.n_jobs,

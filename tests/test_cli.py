@@ -209,7 +209,7 @@ def test_select_defaults_are_those_of_select_parameters():
 
     defaults = inspect.signature(select_parameters).parameters
     args = build_parser().parse_args(["select", "runs.csv"])
-    for name in ("n_top", "k_max", "trade_off", "screening_tol"):
+    for name in ("n_top", "k_max", "trade_off", "screening_tol", "search"):
         assert getattr(args, name) == defaults[name].default
     assert args.trade_off_step == 10  # relevance_trade_offs=None maps 10% steps
 
@@ -228,9 +228,10 @@ def test_select_hands_the_screening_tolerance_to_the_framework(tmp_path, capsys,
     path = tmp_path / "runs.csv"
     make_recordings().to_csv(path, index=False)
     argv = ["select", str(path), "--target", "torque", "--recording", "run", "--time", "t"]
-    argv += ["--screening-tol", "1e-3", "--output", str(tmp_path / "out")]
+    argv += ["--screening-tol", "1e-3", "--search", "fast", "--output", str(tmp_path / "out")]
     assert main(argv) == 2
     assert given["screening_tol"] == 1e-3
+    assert given["search"] == "fast"
     assert "stopped after the call" in capsys.readouterr().err
 
 

@@ -371,6 +371,22 @@ class GaussianEmissions(ABC):
         dims = np.asarray(dims)
         return self._with(self.means[:, dims], self.full_covariances[:, dims][:, :, dims])
 
+    def split(self, state, offset):
+        """The densities with ``state`` split in two halves at ``mean -/+ offset`` (shape
+        (n_dims,)), the new one last; a full covariance loses ``offset offset^T`` (an equal
+        mixture of the halves keeps the state's moments; ``offset`` must keep it positive
+        definite), the other families keep theirs."""
+        offset = np.asarray(offset, dtype=float)
+        means = np.vstack([self.means, self.means[state] + offset])
+        means[state] = self.means[state] - offset
+        full = np.concatenate([self.full_covariances, self.full_covariances[state : state + 1]])
+        return self._with(means, self._split_covariances(full, state, offset))
+
+    @staticmethod
+    def _split_covariances(full, state, offset):
+        """Covariances (n_states + 1, n_dims, n_dims) of :meth:`split` (``state``'s last)."""
+        return full
+
     def rescaled(self, center, scale):
         """The densities of ``center + scale * x`` (a change of units of every column)."""
         return self._with(
@@ -471,6 +487,12 @@ class FullCovariance(GaussianEmissions):
 
     def _with(self, means, full_covariances):
         return FullCovariance(means, full_covariances)
+
+    @staticmethod
+    def _split_covariances(full, state, offset):
+        shrunk = full[state] - np.outer(offset, offset)
+        full[state] = full[-1] = shrunk
+        return full
 
     def _map_covariances(self, scatter, means, weights, relevance):
         moved = self.means - means

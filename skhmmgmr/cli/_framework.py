@@ -89,6 +89,7 @@ def _run_framework(args, data, meta, stages, human=None, experiment=None):
                     progress=not args.quiet,
                     random_state=args.seed,
                     screening_tol=args.screening_tol,
+                    search=args.search,
                 )
         except ValueError as exc:
             raise CommandError(str(exc)) from exc
@@ -404,6 +405,14 @@ def _add_framework_options(parser, defaults=None):
         "(default: the strict one everywhere)"
     )
     parser.add_argument("--screening-tol", type=finite_float, default=None, help=text)
+    text = (
+        "how the wrappers and the state sweep fit their models: full (each from its own "
+        "start until EM converges) or fast (from a joint model, a few EM iterations; the K "
+        "the rule reads and the compared candidates fitted in full)"
+    )
+    parser.add_argument(
+        "--search", choices=("full", "fast"), default=framework["search"], help=text
+    )
     helps = {
         "n_top": "features kept by the filter",
         "k_max": "largest number of states",

@@ -189,7 +189,7 @@ def _fit_on(estimator, X, y, groups, rows, features, n_states):
         "progress": ["boolean"],
         "random_state": ["random_state"],
     }
-    | search_constraints("sampling_period", "estimator", "n_jobs", "memory"),
+    | search_constraints("sampling_period", "estimator", "n_jobs", "memory", "search"),
     prefer_skip_nested_validation=False,  # the estimator's own parameters are checked in fit
 )
 @fill_shared_parameters
@@ -214,6 +214,7 @@ def select_parameters(
     estimator=None,
     n_jobs=None,
     memory=None,
+    search="full",
     progress=True,
     random_state=0,
 ):
@@ -254,7 +255,7 @@ def select_parameters(
         recording and trade-off, on all candidates). Each is fitted on the training and
         validation recordings and receives the framework's parameters it has (``cv``,
         ``accuracy_weight``, ``smoothness_weight``, ``sampling_period``, ``n_jobs``,
-        ``memory``, ``verbose``, ``trade_offs``); see :class:`RelevanceSource`.
+        ``memory``, ``verbose``, ``trade_offs``, ``search``); see :class:`RelevanceSource`.
     anova_trade_offs : list of str, default=None
         Trade-offs compared by the ANOVA of the feature relevance (accuracy and smoothness of
         the best exhaustive subsets) and by the accuracy ANOVA of the state selection; each
@@ -283,6 +284,10 @@ def select_parameters(
         Model template; default ``HMMGMRRegressor(random_state=random_state)``.
     {n_jobs}
     {memory}
+    {search}
+        Here: the search of the exhaustive and forward wrappers (the default relevance sources,
+        and any of the package's wrappers given as one) and of the state sweep. The
+        candidate comparison and the final and baseline models are fitted in full either way.
     progress : bool, default=True
         Show progress bars.
     random_state : int, default=0
@@ -310,9 +315,9 @@ def select_parameters(
     sources = check_sources(relevance_sources)
     w1, w2 = (float(w) / 100 for w in label.split("/"))
     train = split == "train"
-    search = train | (split == "validation")
-    X_s, y_s, g_s = X[search].reset_index(drop=True), y[search], groups[search]
-    cv = PredefinedSplit(np.where(split[search] == "validation", 0, -1))
+    searched = train | (split == "validation")
+    X_s, y_s, g_s = X[searched].reset_index(drop=True), y[searched], groups[searched]
+    cv = PredefinedSplit(np.where(split[searched] == "validation", 0, -1))
     common = dict(
         cv=cv,
         accuracy_weight=w1,
@@ -345,7 +350,7 @@ def select_parameters(
     # The top features in table order, as the forward step orders every subset: the subsets
     # of the top features that the forward step meets are then the exhaustive step's models.
     columns = {"all": list(X.columns), "top": [c for c in X.columns if c in top]}
-    shared = {**common, "trade_offs": labels}
+    shared = {**common, "trade_offs": labels, "search": search}
     fitted, relevance_by_source = {}, {}
     with shared_evaluations():
         for name, source in sources.items():
@@ -383,7 +388,7 @@ def select_parameters(
     features = tuple(chosen["features"])
     lap("relevance and candidates")
 
-    states = StateSelector(estimator, k_max=k_max, tol=tol, refit=False, **common)
+    states = StateSelector(estimator, k_max=k_max, tol=tol, refit=False, search=search, **common)
     states.fit(X_s[list(features)], y_s, g_s)
     n_states = states.n_states_
     state_scores = states.rescore(label)

@@ -93,8 +93,8 @@ def fit_source(source, X, y, groups, *, shared):
     """Fit a clone of ``source.selector`` on ``X`` (the columns it sees).
 
     Of ``shared`` (cv, trade-off weights, sampling period, jobs, cache, verbosity, the mapped
-    trade-offs) the selector receives the parameters it has; ``groups`` goes to ``fit`` when
-    its ``fit`` takes it, or takes ``**params`` with metadata routing on.
+    trade-offs, the search) the selector receives the parameters it has; ``groups`` goes to
+    ``fit`` when its ``fit`` takes it, or takes ``**params`` with metadata routing on.
     """
     selector = clone(source.selector)
     own = selector.get_params(deep=False)

@@ -144,6 +144,14 @@ def _fit_and_evaluate(
 ):
     # ``folds`` is left out of the cache key; ``data_token`` stands for it. ``code_version``
     # is only there for the key (see code_version()).
+    return fitted_and_scored(folds, fold, estimator, columns, params, sampling_period, with_bic)[1]
+
+
+def fitted_and_scored(folds, fold, estimator, columns, params, sampling_period, with_bic=False):
+    """``(model, table)``: a clone of ``estimator`` with ``params`` fitted on the columns
+    ``columns`` of the training rows of split ``fold`` (of :func:`fold_arrays`), and its
+    table of every validation recording (with the BIC of the training rows when
+    ``with_bic``): one evaluation of the full search."""
     X_train, y_train, groups_train, X_val, y_val, groups_val = folds[fold]
     columns = list(columns)
     model = clone(estimator).set_params(**params)
@@ -161,7 +169,7 @@ def _fit_and_evaluate(
     table["converged"] = bool(getattr(model, "converged_", True))
     if with_bic:
         table["bic"] = model.bic(X_fit, y_train, groups=groups_train)
-    return table
+    return model, table
 
 
 def longest_first(estimator, models):
@@ -185,7 +193,7 @@ def longest_first(estimator, models):
     return sorted(range(len(models)), key=lambda i: -costs[i])
 
 
-def _fold_arrays(X, y, codes, splits):
+def fold_arrays(X, y, codes, splits):
     """Training and validation arrays of every split, sliced once for all models.
 
     Column-major: every model takes a subset of the columns, which is then a copy of
@@ -206,7 +214,7 @@ def _fold_arrays(X, y, codes, splits):
 
 
 @contextmanager
-def _shared_with_workers(folds, n_jobs):
+def shared_with_workers(folds, n_jobs):
     """The fold arrays as read-only memory maps when models are fitted in other processes.
 
     joblib would otherwise hash and copy the data for every model it sends to a worker; a
@@ -300,7 +308,7 @@ def evaluate_models(
         for model_id in longest_first(estimator, models)
         for fold in range(len(splits))
     ]
-    with _shared_with_workers(_fold_arrays(X, y, codes, splits), n_jobs) as folds:
+    with shared_with_workers(fold_arrays(X, y, codes, splits), n_jobs) as folds:
         jobs = (
             joblib.delayed(task)(
                 folds=folds,

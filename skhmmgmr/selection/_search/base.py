@@ -3,12 +3,14 @@
 :class:`RecordingSearchMixin` defines the parameters every such selector takes (the estimator,
 the splits, the trade-off, the sampling period, the jobs, the cache, the verbosity), validates
 the search's inputs and is the selectors' one door to the evaluation of models
-(:func:`~._evaluation.evaluate_models`); :class:`RecordingSelector` adds ``SelectorMixin``'s
-support mask for the feature selectors. :func:`read_search_inputs` is the one reader of a
+(:func:`~._evaluation.evaluate_models`, the full search, or :class:`~._screening.FastSearch`,
+the fast one, by ``search``); :class:`RecordingSelector` adds ``SelectorMixin``'s support mask
+for the feature selectors. :func:`read_search_inputs` is the one reader of a
 selector's ``fit`` inputs.
 """
 
 import numbers
+from contextlib import contextmanager
 
 import joblib
 import numpy as np
@@ -17,7 +19,7 @@ from sklearn.base import BaseEstimator, clone
 from sklearn.feature_selection import SelectorMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ..._core._compat import HasMethods
+from ..._core._compat import HasMethods, StrOptions
 from ..._core._docstrings import fill_shared_parameters
 from ..._core._panel import align_target, read_layout, recordings_of
 from ..._core._pickled import PickleVersionMixin
@@ -25,6 +27,7 @@ from ..._core._validation import check_finite, check_target_finite, column_names
 from ...estimator import HMMGMRRegressor
 from ...metrics._table import SAMPLING_PERIOD, WEIGHT
 from ._evaluation import check_recording_splits, evaluate_models, shared_evaluation_store
+from ._screening import SEARCHES, FastSearch, serves
 
 
 def default_estimator():
@@ -40,15 +43,17 @@ def input_feature_names(fitted):
     return np.asarray(names, dtype=object)
 
 
-def _evaluation_context(estimator, y, groups, splits, sampling_period):
+def _evaluation_context(estimator, y, groups, splits, sampling_period, search="full"):
     """What a shared evaluation depends on besides the feature names, as one hash.
 
     The recording ids enter as integer codes and their distinct values: joblib hashes an
     object array of ids by pickling every string (about 1 s for 756,000 rows, once per
-    forward step, while every worker waited; issue #27).
+    forward step, while every worker waited; issue #27). A screened evaluation (the fast
+    search) is shared with fast searches only.
     """
     codes, ids = pd.factorize(groups, sort=False)
-    return joblib.hash((clone(estimator), y, codes, list(ids), splits, sampling_period))
+    context = (clone(estimator), y, codes, list(ids), splits, sampling_period)
+    return joblib.hash((*context, search) if search == "fast" else context)
 
 
 #: The constraints of the parameters every search takes: the selectors' (through
@@ -63,6 +68,7 @@ SEARCH_CONSTRAINTS = {
     "n_jobs": [numbers.Integral, None],
     "memory": [None, str, HasMethods(["cache"])],
     "verbose": ["verbose"],
+    "search": [StrOptions(set(SEARCHES))],
 }
 
 
@@ -107,6 +113,7 @@ class RecordingSearchMixin:
         n_jobs=None,
         memory=None,
         verbose=0,
+        search="full",
     ):
         self.estimator = estimator
         self.cv = cv
@@ -116,6 +123,7 @@ class RecordingSearchMixin:
         self.n_jobs = n_jobs
         self.memory = memory
         self.verbose = verbose
+        self.search = search
 
     def _validate_search(self, X, y, groups):
         # At least one training and one validation row.
@@ -141,10 +149,47 @@ class RecordingSearchMixin:
     def _search_estimator(self):
         return default_estimator() if self.estimator is None else self.estimator
 
-    def _evaluate_models(self, X, y, groups, splits, models, desc, *, with_bic=False):
+    @contextmanager
+    def _searching(self, X, y, groups, splits):
+        """The block of a ``fit`` whose evaluations take the search of ``search``: the fast
+        one holds its data (shared with the workers) until the block ends."""
+        estimator = self._search_estimator()
+        if self.search != "fast" or not serves(estimator, y):
+            self._fast_search = None
+            try:
+                yield
+            finally:
+                del self._fast_search
+            return
+        with FastSearch(
+            estimator,
+            X,
+            y,
+            groups,
+            splits,
+            sampling_period=self.sampling_period,
+            n_jobs=self.n_jobs,
+            memory=self.memory,
+            verbose=self.verbose,
+        ) as search:
+            self._fast_search = search
+            try:
+                yield
+            finally:
+                del self._fast_search
+
+    def _evaluate_models(self, X, y, groups, splits, models, desc, *, with_bic=False, settle=None):
         """The selectors' one door to evaluation: every model, ``(columns, params)``, fitted
-        on the training recordings of every split and scored on its validation recordings
-        (:func:`~._evaluation.evaluate_models`, the full search)."""
+        on the training recordings of every split and scored on its validation recordings.
+
+        In a :meth:`_searching` block of the fast search, :class:`~._screening.FastSearch`
+        screens them, and fits as the full search does the models whose indices ``settle``
+        (a function of the table, see :meth:`~._screening.FastSearch.evaluate`) returns;
+        otherwise every model is fitted in full (:func:`~._evaluation.evaluate_models`).
+        """
+        search = getattr(self, "_fast_search", None)
+        if search is not None:
+            return search.evaluate(models, desc, with_bic=with_bic, settle=settle)
         return evaluate_models(
             self._search_estimator(),
             X,
@@ -169,8 +214,9 @@ class RecordingSearchMixin:
         shared = shared_evaluation_store()
         context = known = None
         if shared is not None and hasattr(self, "feature_names_in_"):
+            search = "full" if getattr(self, "_fast_search", None) is None else "fast"
             context = _evaluation_context(
-                self._search_estimator(), y, groups, splits, self.sampling_period
+                self._search_estimator(), y, groups, splits, self.sampling_period, search
             )
             known = {
                 i: shared[context, key]

@@ -89,6 +89,7 @@ class ExhaustiveFeatureSelector(RecordingSelector):
         n_jobs=None,
         memory=None,
         verbose=0,
+        search="full",
     ):
         super().__init__(
             estimator,
@@ -99,6 +100,7 @@ class ExhaustiveFeatureSelector(RecordingSelector):
             n_jobs=n_jobs,
             memory=memory,
             verbose=verbose,
+            search=search,
         )
         self.max_features = max_features
         self.min_features = min_features
@@ -130,7 +132,8 @@ class ExhaustiveFeatureSelector(RecordingSelector):
             for size in range(self.min_features, largest + 1)
             for subset in itertools.combinations(range(n_features), size)
         ]
-        self.results_ = self._evaluate_subsets(X, y, groups, splits, subsets, "feature subsets")
+        with self._searching(X, y, groups, splits):
+            self.results_ = self._evaluate_subsets(X, y, groups, splits, subsets, "feature subsets")
         best = self.best_subsets(self._trade_off, per_recording=False)
         self.subset_ = best["subset"].iloc[0]
         self.support_ = np.isin(self._names(), self.subset_)

@@ -99,6 +99,7 @@ class ForwardFeatureSelector(RecordingSelector):
         n_jobs=None,
         memory=None,
         verbose=0,
+        search="full",
     ):
         super().__init__(
             estimator,
@@ -109,6 +110,7 @@ class ForwardFeatureSelector(RecordingSelector):
             n_jobs=n_jobs,
             memory=memory,
             verbose=verbose,
+            search=search,
         )
         self.mode = mode
         self.tol = tol
@@ -146,22 +148,23 @@ class ForwardFeatureSelector(RecordingSelector):
                 tables.append(self._evaluate_subsets(X, y, groups, splits, missing, "forward step"))
                 scores.add(missing, tables[-1])
 
-        singles = [(j,) for j in range(n_features)]
-        evaluate(singles)
-        scores.freeze(singles)
+        with self._searching(X, y, groups, splits):
+            singles = [(j,) for j in range(n_features)]
+            evaluate(singles)
+            scores.freeze(singles)
 
-        path_ids = ["average"] if self.mode == "average" else list(range(len(recordings)))
-        paths = {}
-        for label in weights:
-            for path_id in path_ids:
-                positions = slice(None) if path_id == "average" else [path_id]
-                path = ForwardPath(n_features, tol=self.tol, max_features=max_features)
-                paths[label, path_id] = (path, scores.scorer(*weights[label], positions))
-        while any(path.active for path, _ in paths.values()):
-            active = [(path, fn) for path, fn in paths.values() if path.active]
-            evaluate([s for path, _ in active for s in path.candidates()])
-            for path, score_of in active:
-                path.step(score_of)
+            path_ids = ["average"] if self.mode == "average" else list(range(len(recordings)))
+            paths = {}
+            for label in weights:
+                for path_id in path_ids:
+                    positions = slice(None) if path_id == "average" else [path_id]
+                    path = ForwardPath(n_features, tol=self.tol, max_features=max_features)
+                    paths[label, path_id] = (path, scores.scorer(*weights[label], positions))
+            while any(path.active for path, _ in paths.values()):
+                active = [(path, fn) for path, fn in paths.values() if path.active]
+                evaluate([s for path, _ in active for s in path.candidates()])
+                for path, score_of in active:
+                    path.step(score_of)
 
         names = self._names()
         self.paths_ = paths_table(

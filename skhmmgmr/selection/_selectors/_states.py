@@ -42,12 +42,42 @@ K_RANGE = {
 }
 
 
-def _grow_while_gain(n_states, scores, tol):
-    """Smallest K from which one more state improves the score by no more than ``tol``."""
+def _stop(scores, tol):
+    """Position of the smallest K from which one more state improves ``scores`` (in order of
+    K) by no more than ``tol``: the rule reads the scores up to the next position."""
     i = 0
     while i + 1 < len(scores) and relative_gain(scores[i], scores[i + 1]) > tol:
         i += 1
-    return int(n_states[i])
+    return i
+
+
+def _grow_while_gain(n_states, scores, tol):
+    """Smallest K from which one more state improves the score by no more than ``tol``."""
+    return int(n_states[_stop(scores, tol)])
+
+
+def read_by_the_rule(scores, tol, score="performance_score"):
+    """The K whose scores decide :func:`state_choices`'s ``n_states`` for a table of one
+    trade-off: a prefix of the K (in order).
+
+    The average method reads every K up to one past its choice. The per-recording method
+    reads each recording's scores up to one past its own choice, but the decision, the
+    smaller of the two methods' K, needs them only as far as the rounded mean of the
+    recordings' choices is known to reach the average method's K: a recording that improves
+    by more than ``tol`` at every K read chooses at least the last of them. The prefix read
+    is the shortest that settles the decision, or the one that knows every recording's
+    choice.
+    """
+    wide = scores.pivot_table(index="n_states", columns="recording", values=score, sort=True)
+    ks = wide.index.to_numpy()
+    average = _stop(wide.mean(axis=1).to_numpy(), tol)
+    stops = np.array([_stop(wide[recording].to_numpy(), tol) for recording in wide])
+    for length in range(min(average + 2, len(ks)), len(ks) + 1):
+        # with the first ``length`` K read, a recording chooses at least the last of them
+        lowest = ks[np.minimum(stops, length - 1)]
+        if np.floor(lowest.mean() + 0.5) >= ks[average] or np.all(stops + 2 <= length):
+            break
+    return [int(k) for k in ks[:length]]
 
 
 @validate_params(
@@ -187,6 +217,7 @@ class StateSelector(PickleVersionMixin, RecordingSearchMixin, RegressorMixin, Ba
         n_jobs=None,
         memory=None,
         verbose=0,
+        search="full",
     ):
         super().__init__(
             estimator,
@@ -197,6 +228,7 @@ class StateSelector(PickleVersionMixin, RecordingSearchMixin, RegressorMixin, Ba
             n_jobs=n_jobs,
             memory=memory,
             verbose=verbose,
+            search=search,
         )
         self.k_min = k_min
         self.k_max = k_max
@@ -227,9 +259,17 @@ class StateSelector(PickleVersionMixin, RecordingSearchMixin, RegressorMixin, Ba
         ks = list(range(self.k_min, self.k_max + 1))  # fitted largest first (evaluate_models)
         columns = tuple(range(X.shape[1]))
         models = [(columns, {self.param_name: k}) for k in ks]
-        table = self._evaluate_models(
-            X, y, groups, splits, models, "number of states", with_bic=True
-        )
+
+        def settle(table):
+            # the K the rule reads at this trade-off are fitted as the full search does
+            results = table.assign(n_states=[ks[i] for i in table["model"]])
+            scores = rescore_table(results, "n_states", self._trade_off)
+            return [ks.index(k) for k in read_by_the_rule(scores, self.tol)]
+
+        with self._searching(X, y, groups, splits):
+            table = self._evaluate_models(
+                X, y, groups, splits, models, "number of states", with_bic=True, settle=settle
+            )
         table.insert(0, "n_states", [ks[i] for i in table["model"]])
         self.results_ = (
             table.drop(columns="model")
@@ -280,7 +320,9 @@ class StateSelector(PickleVersionMixin, RecordingSearchMixin, RegressorMixin, Ba
         "trade_offs": [str, list, tuple, None],
     }
     | K_RANGE
-    | search_constraints("estimator", "cv", "sampling_period", "n_jobs", "memory", "verbose"),
+    | search_constraints(
+        "estimator", "cv", "sampling_period", "n_jobs", "memory", "verbose", "search"
+    ),
     prefer_skip_nested_validation=False,  # the estimator's own parameters are checked in fit
 )
 @fill_shared_parameters
@@ -299,6 +341,7 @@ def select_n_states(
     n_jobs=None,
     memory=None,
     verbose=0,
+    search="full",
 ):
     """Scores of K = k_min..k_max on validation recordings and the K chosen per trade-off.
 
@@ -323,6 +366,7 @@ def select_n_states(
     {n_jobs}
     {memory}
     {verbose}
+    {search}
 
     Returns
     -------
@@ -343,6 +387,7 @@ def select_n_states(
         n_jobs=n_jobs,
         memory=memory,
         verbose=verbose,
+        search=search,
     ).fit(X, y, groups=groups)
     labels = all_trade_offs(10) if trade_offs is None else labels_of(trade_offs)
     scores = selector.rescore(labels)

@@ -1,0 +1,183 @@
+"""The selection's two searches: ``search="full"`` (every model from its own start until EM
+converges, the path of earlier versions) and ``search="fast"`` (subsets screened from the
+marginal of a joint model, the state sweep grown by splitting a state, the K the 1% rule reads
+fitted in full)."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from _protocol_data import PERIOD, make_protocol
+from sklearn.base import clone
+from sklearn.model_selection import PredefinedSplit
+
+from skhmmgmr import HMMGMRRegressor, StateSelector
+from skhmmgmr.feature_selection import ExhaustiveFeatureSelector, ForwardFeatureSelector
+from skhmmgmr.metrics import evaluate_recordings
+from skhmmgmr.selection import select_parameters
+from skhmmgmr.selection._search import base
+from skhmmgmr.selection._search._score_tables import rescore_table
+from skhmmgmr.selection._selectors._states import read_by_the_rule, state_choices
+
+FEATURES = ["f0", "f1", "f2", "f3"]
+
+
+@pytest.fixture(scope="module")
+def searched():
+    protocol = make_protocol(n_recordings=(4, 3, 2), length=150, n_features=4, seed=0)
+    search = protocol[protocol["split"] != "test"].reset_index(drop=True)
+    cv = PredefinedSplit(np.where(search["split"] == "validation", 0, -1))
+    return search[FEATURES], search["driver_torque"].to_numpy(), search["recording"], cv
+
+
+def _plain_loop(X, y, groups, cv, subsets, estimator):
+    """Accuracy and smoothness of every subset's model on every validation recording: a
+    fit on the training rows, a prediction per validation recording."""
+    train, val = next(cv.split(X, y))
+    rows = []
+    for subset in subsets:
+        model = clone(estimator).fit(
+            X.iloc[train][list(subset)].to_numpy(), y[train], groups=groups.iloc[train]
+        )
+        prediction = model.predict(X.iloc[val][list(subset)].to_numpy(), groups=groups.iloc[val])
+        table = evaluate_recordings(
+            y[val], prediction, groups=groups.iloc[val], sampling_period=PERIOD
+        )
+        rows.append(table.assign(subset=[subset] * len(table)))
+    return pd.concat(rows, ignore_index=True)
+
+
+def test_the_full_search_is_the_plain_loop_and_never_screens(searched, monkeypatch):
+    X, y, groups, cv = searched
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the full search built a fast search")
+
+    monkeypatch.setattr(base, "FastSearch", refuse)
+    selector = ExhaustiveFeatureSelector(
+        cv=cv, sampling_period=PERIOD, max_features=2, search="full"
+    ).fit(X, y, groups=groups)
+    assert "screened" not in selector.results_
+    subsets = [("f0",), ("f1", "f3"), ("f0", "f1")]
+    estimator = HMMGMRRegressor(n_states=2, random_state=0)  # the selectors' default
+    reference = _plain_loop(X, y, groups, cv, subsets, estimator)
+    merged = selector.results_.merge(reference, on=["subset", "recording"], suffixes=("", "_r"))
+    assert len(merged) == len(reference)
+    np.testing.assert_allclose(merged["accuracy"], merged["accuracy_r"], rtol=1e-9)
+    np.testing.assert_allclose(merged["smoothness"], merged["smoothness_r"], rtol=1e-9)
+
+
+def test_the_fast_state_sweep_chooses_the_k_of_the_full_sweep(searched):
+    X, y, groups, cv = searched
+    kwargs = dict(k_max=8, cv=cv, sampling_period=PERIOD, refit=False)
+    full = StateSelector(search="full", **kwargs).fit(X[["f0", "f1"]], y, groups=groups)
+    fast = StateSelector(search="fast", **kwargs).fit(X[["f0", "f1"]], y, groups=groups)
+    assert fast.n_states_ == full.n_states_
+    # the K that the rule reads are fitted as the full sweep fits them, to the bit (and
+    # those an earlier reading of screened scores asked for)
+    read = read_by_the_rule(rescore_table(full.results_, "n_states", "50/50"), 0.01)
+    exact = fast.results_[~fast.results_["screened"]]
+    assert set(read) <= set(exact["n_states"])
+    columns = ["n_states", "recording", "accuracy", "smoothness", "bic"]
+    pd.testing.assert_frame_equal(
+        exact[columns].reset_index(drop=True),
+        full.results_[full.results_["n_states"].isin(exact["n_states"])][columns].reset_index(
+            drop=True
+        ),
+    )
+    # the others come from the chain of splits
+    screened = set(fast.results_.loc[fast.results_["screened"], "n_states"])
+    assert screened and screened == set(range(1, 9)) - set(exact["n_states"])
+
+
+def test_the_rule_reads_a_prefix_that_settles_its_choice():
+    # whatever the scores past the prefix read, the choice of K stays the same
+    rng = np.random.default_rng(0)
+    ks = np.arange(1, 9)
+    for _ in range(200):
+        n_recordings = int(rng.integers(1, 5))
+        drops = rng.choice([0.2, 0.05, 0.003], size=(n_recordings, len(ks)), p=[0.4, 0.3, 0.3])
+        values = np.cumprod(1.0 - drops, axis=1)
+        scores = pd.DataFrame(
+            [
+                {"n_states": k, "recording": f"r{r}", "performance_score": values[r, i]}
+                for r in range(n_recordings)
+                for i, k in enumerate(ks)
+            ]
+        )
+        read = read_by_the_rule(scores, 0.01)
+        assert read == list(ks[: len(read)])
+        choice = state_choices(scores)["n_states"].iloc[0]
+        unread = ~scores["n_states"].isin(read)
+        for _ in range(5):
+            changed = scores.copy()
+            changed.loc[unread, "performance_score"] = rng.uniform(0.01, 2.0, unread.sum())
+            assert state_choices(changed)["n_states"].iloc[0] == choice
+
+
+def test_the_fast_exhaustive_search_keeps_the_relevant_features(searched):
+    # The torque depends on f0 and f1. Both searches keep them; on these short recordings
+    # a K=2 model has several optima, and the fast search's subset may hold one more feature
+    # than the full search's (its screened models sit in the joint model's optimum).
+    X, y, groups, cv = searched
+    kwargs = dict(cv=cv, sampling_period=PERIOD)
+    full = ExhaustiveFeatureSelector(search="full", **kwargs).fit(X, y, groups=groups)
+    fast = ExhaustiveFeatureSelector(search="fast", **kwargs).fit(X, y, groups=groups)
+    assert {"f0", "f1"} <= set(fast.subset_) and {"f0", "f1"} <= set(full.subset_)
+    merged = fast.results_.merge(full.results_, on=["subset", "recording"], suffixes=("", "_f"))
+    assert len(merged) == len(full.results_)
+    # the joint model (all features) is the full search's model; the others start from it
+    joint = merged[merged["n_features"] == len(FEATURES)]
+    assert not joint["screened"].any()
+    np.testing.assert_array_equal(joint["accuracy"], joint["accuracy_f"])
+    assert merged.loc[merged["n_features"] < len(FEATURES), "screened"].all()
+
+
+def test_the_fast_forward_search_starts_from_the_full_search_first_step(searched):
+    X, y, groups, cv = searched
+    kwargs = dict(cv=cv, sampling_period=PERIOD, trade_offs=["100/0"])
+    full = ForwardFeatureSelector(search="full", **kwargs).fit(X, y, groups=groups)
+    fast = ForwardFeatureSelector(search="fast", **kwargs).fit(X, y, groups=groups)
+    assert {"f0", "f1"} <= set(fast.subset_) and {"f0", "f1"} <= set(full.subset_)
+    # both paths take the same feature first
+    first = [p[p["accepted"]]["feature"].iloc[0] for p in (full.paths_, fast.paths_)]
+    assert first[0] == first[1]
+
+
+def test_an_estimator_the_fast_search_does_not_serve_is_searched_in_full(searched):
+    X, y, groups, cv = searched
+    estimator = HMMGMRRegressor(output_smoothing=0.5, random_state=0)
+    kwargs = dict(cv=cv, sampling_period=PERIOD, max_features=2)
+    tables = [
+        ExhaustiveFeatureSelector(estimator, search=search, **kwargs)
+        .fit(X, y, groups=groups)
+        .results_
+        for search in ("full", "fast")
+    ]
+    pd.testing.assert_frame_equal(tables[0], tables[1])
+
+
+def test_an_unknown_search_is_refused_by_name(searched):
+    X, y, groups, cv = searched
+    with pytest.raises(ValueError, match="'search' parameter"):
+        StateSelector(k_max=2, cv=cv, sampling_period=PERIOD, search="quick").fit(
+            X, y, groups=groups
+        )
+    protocol = make_protocol(n_recordings=(2, 2, 1), length=60, n_features=2)
+    with pytest.raises(ValueError, match="'search' parameter"):
+        select_parameters(protocol, k_max=2, search="quick", progress=False)
+
+
+def test_the_framework_searches_fast_and_fits_what_it_compares_in_full():
+    protocol = make_protocol(n_recordings=(4, 3, 2), length=150, n_features=4, seed=1)
+    fast = select_parameters(protocol, k_max=6, progress=False, search="fast")
+    assert fast.sources["exhaustive"].search == fast.sources["forward"].search == "fast"
+    assert fast.exhaustive["screened"].any() and fast.states["screened"].any()
+    assert {"f0", "f1"} <= set(fast.features)
+    # the final model is fitted as the full search fits it, on the training recordings
+    train = protocol[protocol["split"] == "train"]
+    final = HMMGMRRegressor(n_states=fast.n_states, random_state=0).fit(
+        train[list(fast.features)].to_numpy(),
+        train["driver_torque"].to_numpy(),
+        groups=train["recording"],
+    )
+    np.testing.assert_array_equal(fast.final_model.means_, final.means_)
