@@ -314,7 +314,7 @@ def die(results, **kwargs):
     for _ in results:
         os.kill(os.getpid(), signal.SIGKILL)
 
-_evaluation.tqdm = die
+_evaluation.progress_bar = die
 rng = np.random.default_rng(0)
 X = np.cumsum(rng.normal(size=(2000, 3)), axis=0)
 with joblib.parallel_config(backend="loky", idle_worker_timeout=1):
