@@ -1,12 +1,14 @@
 """Smoke test of an installed skhmmgmr (wheel or sdist), run by .ci/run outside the checkout.
 
-Imports the package, checks the version, fits and predicts on a short simulated recording, loads
-the comma2k19 sample that ships as package data (with its licence) and runs the command line's
-help. Exits non-zero on any failure.
+Imports the package, checks its version against the one the built artefact's file name carries
+(the first argument) and the installed distribution's metadata, fits and predicts on a short
+simulated recording, loads the comma2k19 sample that ships as package data (with its licence)
+and runs the command line's help. Exits non-zero on any failure.
 """
 
 import subprocess
 import sys
+from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
@@ -14,8 +16,6 @@ import numpy as np
 import skhmmgmr
 from skhmmgmr import HMMGMRRegressor
 from skhmmgmr.datasets import load_comma2k19_sample, make_lane_keeping
-
-EXPECTED_VERSION = "0.1.0"
 
 
 def check(condition, message):
@@ -28,9 +28,11 @@ def main():
     location = Path(skhmmgmr.__file__).resolve().parent
     print(f"skhmmgmr {skhmmgmr.__version__} from {location}")
     check("site-packages" in location.parts, f"not the installed package: {location}")
+    expected = sys.argv[1]
     check(
-        skhmmgmr.__version__ == EXPECTED_VERSION,
-        f"version {skhmmgmr.__version__!r}, expected {EXPECTED_VERSION!r}",
+        skhmmgmr.__version__ == expected == version("skhmmgmr"),
+        f"version {skhmmgmr.__version__!r}, metadata {version('skhmmgmr')!r}, "
+        f"the artefact's name {expected!r}",
     )
 
     data = make_lane_keeping(30.0, sampling_rate=20.0, random_state=0)
