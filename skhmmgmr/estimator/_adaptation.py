@@ -303,7 +303,7 @@ class AdaptMixin:
 
     def _choose_adaptation(self, X, Y, recordings, pairs, n_iter):
         """The table of the "auto" choice among ``pairs`` on the rows ``X, Y`` of
-        ``recordings`` (:mod:`~skhmmgmr.estimator._adaptation_choice`): every candidate on
+        ``recordings`` (the rule of :meth:`adapt`'s "auto"): every candidate on
         the time folds, then the choice and the fresh fit on held-out recordings when the
         fresh fit leads on the time folds."""
         errors, counts = self._held_out_errors(X, Y, time_folds(recordings), pairs, n_iter)
