@@ -103,6 +103,9 @@ def _parse(argv=None):
     parser.add_argument("--models", nargs="+", default=list(MODELS))
     parser.add_argument("--drop", nargs="*", default=[], help="inputs the driver model leaves out")
     parser.add_argument("--states", type=int, default=1, help="the driver model's n_states")
+    parser.add_argument(
+        "--smoothing", default="auto", help="the driver model's output_smoothing (or 'none')"
+    )
     parser.add_argument("--jobs", type=int, default=1, help="cases in parallel")
     parser.add_argument("--quick", action="store_true", help="defensive, 100 Hz, default car")
     parser.add_argument("--frontier", action="store_true", help="the trade-off instead")
@@ -116,6 +119,9 @@ def _parse(argv=None):
         args.seeds, args.settings = args.seeds[:1], [1, 4, 7]
         args.penalties = args.penalties[::2]
     args.cars = [None if car == "default" else int(car) for car in args.cars]
+    if args.smoothing not in ("auto", "none"):
+        args.smoothing = float(args.smoothing)
+    args.smoothing = None if args.smoothing == "none" else args.smoothing
     return args
 
 
@@ -144,14 +150,18 @@ def protocols(style, rate, car, seed, args):
     return plain, perturbed
 
 
-def fit(name, plain, perturbed, rate, penalty, drop=(), n_states=1):
+def fit(name, plain, perturbed, rate, penalty, drop=(), n_states=1, smoothing="auto"):
     """The model ``name`` of the module docstring, fitted on its training recordings."""
     train = (perturbed if name == "driver" else plain).query("split == 'train'")
     X, y, groups = train[FEATURES], train["driver_torque"], train["recording"]
     if name == "driver":
         X = train[[name for name in DRIVER_MODEL_FEATURES if name not in drop]]
         model = make_driver_model(
-            n_states, sampling_period=1 / rate, perturbation_penalty=penalty, random_state=0
+            n_states,
+            sampling_period=1 / rate,
+            perturbation_penalty=penalty,
+            output_smoothing=smoothing,
+            random_state=0,
         )
         return model.fit(X, y, groups=groups, perturbation=train[PERTURBATION])
     if name == "pipeline":
@@ -258,7 +268,9 @@ def run_case(style, rate, car, seed, args, specs=None):
         rows = []
         for name, penalty in specs:
             start = time.perf_counter()
-            model = fit(name, plain, perturbed, rate, penalty, args.drop, args.states)
+            model = fit(
+                name, plain, perturbed, rate, penalty, args.drop, args.states, args.smoothing
+            )
             fitted = time.perf_counter() - start
             case = dict(style=style, rate=rate, car=car or "default", seed=seed, model=name)
             case.update(open_loop(name, model, test), penalty=penalty, fit_s=fitted)
@@ -484,7 +496,9 @@ def road_figure(args, path):
     with threadpool_limits(1), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for name, label in [("driver", "driver model"), ("pipeline", "torque pipeline")]:
-            model = fit(name, plain, perturbed, rate, args.penalty, args.drop, args.states)
+            model = fit(
+                name, plain, perturbed, rate, args.penalty, args.drop, args.states, args.smoothing
+            )
             runs[label] = drive(model, **road)
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
     for label, frame in runs.items():

@@ -18,7 +18,11 @@ from skhmmgmr.datasets import (
     to_panel,
     torque_ahead,
 )
-from skhmmgmr.datasets._simulator._closed_loop import LOG_COLUMNS
+from skhmmgmr.datasets._simulator._closed_loop import (
+    LOG_COLUMNS,
+    MAX_WHEEL_ANGLE,
+    lost_control,
+)
 from skhmmgmr.datasets._simulator._section import Section, SectionSpec
 from skhmmgmr.datasets._simulator._sensors import draw_errors, measure
 from skhmmgmr.metrics import LANE_KEEPING_METRICS, lane_keeping_metrics
@@ -135,6 +139,45 @@ def test_a_driver_that_loses_control_ends_the_drive():
         frame = drive(lambda row: 3.0, duration=60.0, sampling_rate=20.0, **SEEDS)
     assert 0 < len(frame) < 1200
     assert frame.attrs["lost_control"] == pytest.approx(len(frame) / 20.0)
+
+
+def test_a_model_that_spins_the_wheel_away_loses_control_instead_of_diverging():
+    # a positive feedback on the wheel's angle: the steering system's inverse, overdone
+    angle = FEATURES.index("steering_wheel_angle")
+
+    def diverging(row):
+        return 100.0 * row[angle]
+
+    with pytest.warns(UserWarning, match="lost control .*steering wheel at"):
+        frame = drive(diverging, duration=20.0, sampling_rate=20.0, **SEEDS)
+    assert 0 < len(frame) < 400
+    assert frame.attrs["lost_control"] == pytest.approx(len(frame) / 20.0)
+    assert "steering wheel" in frame.attrs["lost_control_reason"]
+    # every logged row is finite and the wheel within the bound; the lateral deviation too
+    sensed = frame[FEATURES + ["driver_torque"]].to_numpy()
+    assert np.isfinite(sensed).all()
+    assert np.abs(frame["steering_wheel_angle"]).max() <= MAX_WHEEL_ANGLE
+    assert np.abs(frame["lateral_deviation_0m"]).max() < 10.0
+
+
+def test_a_finite_but_runaway_torque_ends_the_drive_with_finite_rows():
+    with pytest.warns(UserWarning, match="lost control"):
+        frame = drive(lambda row: 1e300, duration=5.0, sampling_rate=20.0, **SEEDS)
+    assert len(frame) == 1 and frame.attrs["lost_control"] == pytest.approx(0.05)
+    assert np.isfinite(frame[FEATURES].to_numpy()).all()
+
+
+def test_a_drive_that_keeps_control_has_no_reason():
+    frame = drive(lambda row: 0.0, duration=2.0, sampling_rate=20.0, **SEEDS)
+    assert frame.attrs["lost_control"] is None and frame.attrs["lost_control_reason"] is None
+
+
+def test_the_reason_for_a_loss_of_control_names_what_went_wrong():
+    calm = dict.fromkeys(("theta", "theta_d", "v", "r", "e_y", "e_psi"), 0.0)
+    assert lost_control({**calm, "v": math.nan, "r": math.inf}) == "states not finite: v, r"
+    assert "steering wheel at -13 rad" in lost_control({**calm, "theta": -13.0})
+    assert "lateral deviation 10.5 m" in lost_control({**calm, "e_y": 10.5})
+    assert lost_control({**calm, "theta_d": 1e308, "v": 1e308}).startswith("runaway")
 
 
 def test_the_row_a_callable_gets_is_the_sensed_features_and_read_only():

@@ -18,6 +18,10 @@ from ._steering import steering_column
 from ._vehicle import single_track
 
 LOST_CONTROL = 10.0  # [m] lateral deviation at which the simulation stops
+#: [rad] steering-wheel angle at which the simulation stops: two turns either way, past the
+#: lock of any car (a model whose torque follows the wheel can spin it without bound while
+#: the tyres, saturated, keep the car within the lane's reach).
+MAX_WHEEL_ANGLE = 4.0 * math.pi
 #: The columns of a simulation's log: the steering wheel's angle, velocity and acceleration,
 #: the vehicle's lateral velocity and acceleration, yaw rate and acceleration, roll angle,
 #: velocity and acceleration, its arc length along the road, its lateral and heading
@@ -44,7 +48,13 @@ INITIAL_COLUMNS = ("theta", "theta_d", "theta_dd", "v", "r", "phi", "phi_d", "s"
 
 
 def simulate(
-    section, n_samples, torque_source=None, initial=None, column_log=None, perturbation=None
+    section,
+    n_samples,
+    torque_source=None,
+    initial=None,
+    column_log=None,
+    perturbation=None,
+    lost=None,
 ):
     """Integrate the closed loop of ``section`` for ``n_samples`` samples; return the log,
     an array (n_samples, 14) of :data:`LOG_COLUMNS`.
@@ -53,7 +63,11 @@ def simulate(
     every logged sample as ``torque_source(row, states)`` with the states of the logged
     columns but the torque (the steering-wheel acceleration of the integration step before);
     its torque acts at the steering wheel until the next sample. It may lose control: the log
-    then ends at the sample where the lateral deviation first exceeds :data:`LOST_CONTROL`.
+    then ends at the first sample where the lateral deviation exceeds :data:`LOST_CONTROL`,
+    the steering wheel's angle exceeds :data:`MAX_WHEEL_ANGLE` or a state is not finite
+    (:func:`lost_control`); a human that does raises a ``RuntimeError``.
+    ``lost``: a list to which the reason (:func:`lost_control`) is appended when the torque
+    source loses control.
 
     ``initial`` (with a ``torque_source`` only): start from a logged state instead of rest,
     the values of :data:`INITIAL_COLUMNS` and the sensed torque of the integration step
@@ -93,12 +107,21 @@ def simulate(
     row = 0
     for k in range(n_samples * n_sub):
         sample = k % n_sub == 0
-        if sample and abs(e_y) > LOST_CONTROL:
+        # one cheap test per sample (False for a NaN too); the reason only when it fails
+        if sample and not (
+            abs(e_y) <= LOST_CONTROL
+            and abs(theta) <= MAX_WHEEL_ANGLE
+            and math.isfinite(theta_d + theta_dd + v + r + phi + phi_d + s + e_psi)
+        ):
+            states = (theta, theta_d, theta_dd, v, r, phi, phi_d, s, e_y, e_psi)
+            reason = lost_control(dict(zip(INITIAL_COLUMNS, states, strict=True)))
             if human is None:
+                if lost is not None:
+                    lost.append(reason)
                 return log[:row]
             raise RuntimeError(
-                f"The driver lost control {k * dt:.1f} s into the recording "
-                f"(lateral deviation {e_y:.1f} m); driver parameters: {section.parameters}."
+                f"The driver lost control {k * dt:.1f} s into the recording ({reason}); "
+                f"driver parameters: {section.parameters}."
             )
         if human is not None:
             t_hand = human(k, s, e_y, e_psi, s_d, e_y_d, e_psi_d, theta)
@@ -145,6 +168,25 @@ def simulate(
         e_psi_d = r - kappa * s_d
         e_psi += dt * e_psi_d
     return log
+
+
+def lost_control(states):
+    """Why the closed loop with ``states`` (a mapping of the logged states by their names in
+    :data:`LOG_COLUMNS`) is out of control, in words: states that are not finite, the
+    steering wheel beyond :data:`MAX_WHEEL_ANGLE`, the lateral deviation beyond
+    :data:`LOST_CONTROL`, or a runaway (finite states too large to add up)."""
+    bad = [name for name, value in states.items() if not math.isfinite(value)]
+    if bad:
+        return f"states not finite: {', '.join(bad)}"
+    theta, e_y = states["theta"], states["e_y"]
+    if abs(theta) > MAX_WHEEL_ANGLE:
+        return (
+            f"steering wheel at {theta:.3g} rad, beyond {MAX_WHEEL_ANGLE:.3g} rad "
+            "(two turns either way)"
+        )
+    if abs(e_y) > LOST_CONTROL:
+        return f"lateral deviation {e_y:.1f} m, beyond {LOST_CONTROL:g} m"
+    return "runaway states: " + ", ".join(f"{name}={value:.3g}" for name, value in states.items())
 
 
 def _start(initial, vehicle):

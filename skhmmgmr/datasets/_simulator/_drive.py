@@ -7,7 +7,6 @@ import numpy as np
 
 from ..._core._compat import validate_params
 from ..._core._schema import FEATURE_NAMES
-from ._closed_loop import LOST_CONTROL
 from ._driver import DRIVER_STYLES
 from ._fmu_driver import FMUDriver, is_fmu
 from ._lane_keeping import human_run
@@ -106,10 +105,12 @@ def drive(
         the 18 sensed features as the model got them, and ``driver_torque``, the torque
         sensor's reading (less the perturbation, if any): the driver's torque with a rigid
         column, the torsion bar's torque in a car with a ``column_stiffness`` (see
-        :class:`VehicleParameters`). A model that
-        loses control (lateral deviation beyond 10 m) ends the drive there: the frame is
-        shorter, and
-        ``frame.attrs["lost_control"]`` holds the time [s] (``None`` otherwise).
+        :class:`VehicleParameters`). A model that loses control ends the drive there, with
+        a warning: the lateral deviation beyond 10 m, the steering wheel beyond two turns
+        either way (past the lock of any car: a model whose torque follows the wheel can
+        spin it without bound), or a state that is not finite. The
+        frame is then shorter, ``frame.attrs["lost_control"]`` holds the time [s] and
+        ``frame.attrs["lost_control_reason"]`` the reason in words (both ``None`` otherwise).
 
     See Also
     --------
@@ -177,8 +178,9 @@ def drive(
             view.flags.writeable = True
         return as_torque(torque, f"The driver {name}", row / spec.sampling_rate)
 
+    reasons = []
     try:
-        log = section.simulate(torque_source)
+        log = section.simulate(torque_source, lost=reasons)
     finally:
         if fmu is not None:
             fmu.close()
@@ -196,10 +198,11 @@ def drive(
     )
     lost = None if n_driven == section.n_samples else n_driven / spec.sampling_rate
     frame.attrs["lost_control"] = lost
+    frame.attrs["lost_control_reason"] = reasons[0] if reasons else None
     if lost is not None:
         warnings.warn(
-            f"{name} lost control {lost:.2f} s into the drive (lateral deviation beyond "
-            f"{LOST_CONTROL:g} m): the frame ends there.",
+            f"{name} lost control {lost:.2f} s into the drive ({reasons[0]}): the frame ends "
+            "there.",
             UserWarning,
             stacklevel=2,
         )

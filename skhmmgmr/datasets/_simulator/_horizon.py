@@ -122,8 +122,9 @@ def torque_ahead(
         ``time`` (the start time ``t`` [s], when the estimate is made), ``horizon`` [s],
         ``estimate`` (the model's torque at ``t + horizon`` in the rollout from ``t``),
         ``driver_torque`` (the torque sensor's reading at ``t + horizon`` in the recording),
-        ``lost_control`` (the rollout left the road, beyond 10 m, before ``t + horizon``; the
-        estimate then holds the last one of the rollout), and with ``return_proba``
+        ``lost_control`` (the rollout lost control before ``t + horizon``, as in
+        :func:`drive`: beyond 10 m, the steering wheel beyond two turns or a state not
+        finite; the estimate then holds the last one of the rollout), and with ``return_proba``
         ``state_proba_0`` ... ``state_proba_{n_states-1}``: the filtered state probabilities
         of the model's stream at ``t + horizon`` (at ``t`` for horizon 0).
 

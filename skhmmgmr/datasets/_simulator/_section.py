@@ -217,7 +217,7 @@ class Section:
                 perturbation_stream(spec.random_state, rng),
             )
 
-    def simulate(self, torque_source=None, column_log=None):
+    def simulate(self, torque_source=None, column_log=None, lost=None):
         """The logged states of the closed loop over the section (see :func:`simulate`)."""
         return simulate(
             self,
@@ -225,6 +225,7 @@ class Section:
             torque_source,
             column_log=column_log,
             perturbation=self.perturbation,
+            lost=lost,
         )
 
     def logged_perturbation(self, n_rows):
