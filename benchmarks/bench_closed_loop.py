@@ -42,6 +42,7 @@ import warnings
 
 import numpy as np
 import pandas as pd
+from _roads import OneRow, road_seed
 from sklearn.ensemble import HistGradientBoostingRegressor
 from sklearn.linear_model import RidgeCV
 from threadpoolctl import threadpool_limits
@@ -80,18 +81,6 @@ def _parse(argv=None):
     return args
 
 
-class Columns:
-    """A fitted model of some columns, as a driver: one sensed row to a torque."""
-
-    def __init__(self, model, columns):
-        self.model, self.columns = model, columns
-        self.positions = [FEATURES.index(c) for c in columns]
-        self.__name__ = type(model).__name__
-
-    def __call__(self, row):
-        return self.model.predict(row[self.positions][None, :])[0]
-
-
 def fit_models(train):
     """The models of the module docstring, fitted on ``train``."""
     X, y, groups = train[FEATURES], train["driver_torque"], train["recording"]
@@ -109,7 +98,7 @@ def fit_models(train):
 
 def as_driver(name, model):
     """What ``drive`` gets: the package's models as they are, the others one row at a time."""
-    return Columns(model, FEATURES) if name in ("ridge", "boosting") else model
+    return OneRow(model) if name in ("ridge", "boosting") else model
 
 
 def open_loop(model, name, frame):
@@ -125,10 +114,6 @@ def open_loop(model, name, frame):
         accuracy_score(y, estimate, groups=groups),
         smoothness_score(estimate, time=frame["time"].to_numpy(), groups=groups),
     )
-
-
-def road_seed(style, setting, seed):
-    return 10_000 + 1_000 * seed + 10 * setting + list(DRIVER_STYLES).index(style)
 
 
 def closed_loop(args):

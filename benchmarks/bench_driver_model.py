@@ -56,6 +56,7 @@ import warnings
 
 import numpy as np
 import pandas as pd
+from _roads import OneRow, road_seed
 from joblib import Parallel, delayed
 from sklearn.ensemble import HistGradientBoostingRegressor
 from threadpoolctl import threadpool_limits
@@ -125,11 +126,6 @@ def _parse(argv=None):
     return args
 
 
-def road_seed(style, setting, seed):
-    """The roads of ``bench_closed_loop.py``."""
-    return 10_000 + 1_000 * seed + 10 * setting + list(DRIVER_STYLES).index(style)
-
-
 def protocols(style, rate, car, seed, args):
     """The protocol as it is and with the perturbation experiment (same seeds); None when the
     simulated human itself leaves the road in that car."""
@@ -173,16 +169,6 @@ def fit(name, plain, perturbed, rate, penalty, drop=(), n_states=1, smoothing="a
             train[list(PREVIEW_FEATURES)], y, groups=groups
         )
     return HistGradientBoostingRegressor(random_state=0).fit(X.to_numpy(), y)
-
-
-class OneRow:
-    """A fitted scikit-learn regressor as a driver: one sensed row to a torque."""
-
-    def __init__(self, model):
-        self.model, self.__name__ = model, type(model).__name__
-
-    def __call__(self, row):
-        return float(self.model.predict(row[None, :])[0])
 
 
 def as_driver(name, model):

@@ -2,6 +2,7 @@
 that the driver does not know (``perturbation=``)."""
 
 import dataclasses
+import math
 
 import numpy as np
 import pandas as pd
@@ -17,6 +18,7 @@ from skhmmgmr.datasets import (
     make_driving_protocol,
     make_lane_keeping,
 )
+from skhmmgmr.datasets._simulator._protocol import _perturbed
 from skhmmgmr.datasets._simulator._section import Section, SectionSpec
 
 PERTURBATION = "steering_perturbation"
@@ -136,6 +138,20 @@ def test_the_protocol_perturbs_a_share_of_its_training_recordings():
     everything = make_driving_protocol(("defensive",), random_state=0, perturbation=0.2, **sizes)
     perturbed = everything.groupby("recording")[PERTURBATION].apply(lambda p: bool(p.any()))
     assert perturbed.to_dict() == {r: "-train-" in r for r in perturbed.index}
+
+
+@pytest.mark.parametrize("n_train", [12, 10, 7])
+@pytest.mark.parametrize("share", [0.0, 0.05, 0.3, 1 / 3, 0.5, 0.99, 1.0])
+def test_the_number_of_perturbed_recordings_is_rounded_down(n_train, share):
+    sections = [("train", 1, k) for k in range(n_train)] + [("validation", 7, 0), ("test", 7, 0)]
+    flags = _perturbed(sections, share)
+    expected = {(12, 0.3): 3, (12, 0.99): 11, (10, 0.99): 9, (7, 0.5): 3, (7, 0.3): 2}
+    assert sum(flags) == expected.get((n_train, share), math.floor(share * n_train + 1e-9))
+    assert flags[-2:] == [False, False]  # never the validation or test recordings
+    # spread evenly: between two perturbed recordings, about 1 / share of them
+    where = np.flatnonzero(flags)
+    if where.size > 1:
+        assert np.ptp(np.diff(where)) <= 1
 
 
 def test_the_perturbation_is_a_label_not_a_feature_of_a_loaded_file(tmp_path):

@@ -122,7 +122,9 @@ def make_driving_protocol(
         experiment and no such column.
     perturbed_share : float in [0, 1], default=1.0
         The share of the training recordings perturbed, spread evenly over the settings
-        (``1/3`` of 12: the 3rd, 6th, 9th and 12th). A recording keeps its seeds whether it
+        (``1/3`` of 12: the 3rd, 6th, 9th and 12th); their number is rounded down,
+        ``floor(perturbed_share * n_train)`` (0.3 of 12 perturbs 3, any share below
+        ``1/n_train`` none). A recording keeps its seeds whether it
         is perturbed or not, and one that is not is the recording of the protocol without
         ``perturbation``.
     n_jobs : int, default=None
