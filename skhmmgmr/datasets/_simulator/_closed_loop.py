@@ -107,22 +107,10 @@ def simulate(
     row = 0
     for k in range(n_samples * n_sub):
         sample = k % n_sub == 0
-        # one cheap test per sample (False for a NaN too); the reason only when it fails
-        if sample and not (
-            abs(e_y) <= LOST_CONTROL
-            and abs(theta) <= MAX_WHEEL_ANGLE
-            and math.isfinite(theta_d + theta_dd + v + r + phi + phi_d + s + e_psi)
-        ):
+        if sample:
             states = (theta, theta_d, theta_dd, v, r, phi, phi_d, s, e_y, e_psi)
-            reason = lost_control(dict(zip(INITIAL_COLUMNS, states, strict=True)))
-            if human is None:
-                if lost is not None:
-                    lost.append(reason)
+            if _lost_control_at(k * dt, states, section, human is None, lost):
                 return log[:row]
-            raise RuntimeError(
-                f"The driver lost control {k * dt:.1f} s into the recording ({reason}); "
-                f"driver parameters: {section.parameters}."
-            )
         if human is not None:
             t_hand = human(k, s, e_y, e_psi, s_d, e_y_d, e_psi_d, theta)
         x = s * inv_ds
@@ -168,6 +156,25 @@ def simulate(
         e_psi_d = r - kappa * s_d
         e_psi += dt * e_psi_d
     return log
+
+
+def _lost_control_at(time, states, section, model, lost):
+    """Whether the loop with ``states`` (of :data:`INITIAL_COLUMNS`) at ``time`` [s] is out of
+    control (:func:`lost_control`); a model's (``model``: a torque source) reason goes to
+    ``lost``, a human raises."""
+    theta, e_y = states[0], states[8]
+    # one cheap test (False for a NaN too); the reason only when it fails
+    if abs(e_y) <= LOST_CONTROL and abs(theta) <= MAX_WHEEL_ANGLE and math.isfinite(sum(states)):
+        return False
+    reason = lost_control(dict(zip(INITIAL_COLUMNS, states, strict=True)))
+    if not model:
+        raise RuntimeError(
+            f"The driver lost control {time:.1f} s into the recording ({reason}); "
+            f"driver parameters: {section.parameters}."
+        )
+    if lost is not None:
+        lost.append(reason)
+    return True
 
 
 def lost_control(states):
