@@ -11,6 +11,7 @@ selector's ``fit`` inputs.
 
 import numbers
 from contextlib import contextmanager
+from functools import partial
 
 import joblib
 import numpy as np
@@ -171,6 +172,7 @@ class RecordingSearchMixin:
             n_jobs=self.n_jobs,
             memory=self.memory,
             verbose=self.verbose,
+            evaluate_in_full=partial(self._evaluate_in_full, X, y, groups, splits),
         ) as search:
             self._fast_search = search
             try:
@@ -190,6 +192,11 @@ class RecordingSearchMixin:
         search = getattr(self, "_fast_search", None)
         if search is not None:
             return search.evaluate(models, desc, with_bic=with_bic, settle=settle)
+        return self._evaluate_in_full(X, y, groups, splits, models, desc, with_bic=with_bic)
+
+    def _evaluate_in_full(self, X, y, groups, splits, models, desc, *, with_bic=False):
+        """Every model fitted as the full search fits it (:func:`~._evaluation.evaluate_models`,
+        the selector's settings); the fast search's door to its exact fits too."""
         return evaluate_models(
             self._search_estimator(),
             X,
