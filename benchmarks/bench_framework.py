@@ -207,8 +207,11 @@ def compare_searches(full, fast):
     return result
 
 
-def run_searches(seeds, *, n_drivers, duration, n_jobs, cache, save=None):
-    """``search="full"`` and ``search="fast"`` side by side on the data of every seed."""
+def run_searches(seeds, *, n_drivers, duration, n_jobs, cache, save=None, full_tables=None):
+    """``search="full"`` and ``search="fast"`` side by side on the data of every seed;
+    ``full_tables``: a folder of an earlier run's saved tables (``--save``), whose full
+    search (``full_search_seed_<seed>.joblib``) is read instead of run again (the full path
+    does not depend on the fast one; its times are those of that run)."""
     results = {}
     for seed in seeds:
         data = thesis_protocol(n_drivers, duration=duration, seed=seed, cache=cache)
@@ -216,6 +219,11 @@ def run_searches(seeds, *, n_drivers, duration, n_jobs, cache, save=None):
         reports, walls = {}, {}
         for search in ("full", "fast"):
             label = f"{search} search seed {seed}"
+            if search == "full" and full_tables:
+                path = os.path.join(full_tables, f"full_search_seed_{seed}.joblib")
+                reports[search], walls[search] = load_tables(path)
+                print(f"{label}: tables of an earlier run ({walls[search]:.0f} s wall), {path}")
+                continue
             estimator = HMMGMRRegressor(random_state=0)
             reports[search], walls[search] = run_framework(
                 data, estimator, n_jobs, label, save, search=search
@@ -553,6 +561,11 @@ def main(argv=None):
     parser.add_argument(
         "--scale-parts", nargs="+", choices=["rows", "features"], default=None, help="with --scale"
     )
+    parser.add_argument(
+        "--full-tables",
+        default=None,
+        help="with --searches: read the full search of an earlier --save folder, not run it",
+    )
     parser.add_argument("--skip-reference", action="store_true")
     parser.add_argument("--skip-peer", action="store_true")
     parser.add_argument("--save", default=None, help="directory for the selection tables")
@@ -581,6 +594,7 @@ def main(argv=None):
             n_jobs=args.n_jobs,
             cache=args.cache,
             save=args.save,
+            full_tables=args.full_tables,
         )
     return run(
         args.drivers,

@@ -15,7 +15,7 @@ from skhmmgmr.feature_selection import ExhaustiveFeatureSelector, ForwardFeature
 from skhmmgmr.metrics import evaluate_recordings
 from skhmmgmr.selection import select_parameters
 from skhmmgmr.selection._search import base
-from skhmmgmr.selection._search._score_tables import rescore_table
+from skhmmgmr.selection._search._score_tables import best_per_recording, rescore_table
 from skhmmgmr.selection._selectors._states import read_by_the_rule, state_choices
 
 FEATURES = ["f0", "f1", "f2", "f3"]
@@ -129,7 +129,17 @@ def test_the_fast_exhaustive_search_keeps_the_relevant_features(searched):
     joint = merged[merged["n_features"] == len(FEATURES)]
     assert not joint["screened"].any()
     np.testing.assert_array_equal(joint["accuracy"], joint["accuracy_f"])
-    assert merged.loc[merged["n_features"] < len(FEATURES), "screened"].all()
+    # every recording's best subset at every trade-off of the grid, and its near-ties, are
+    # fitted as the full search fits them, to the bit; the other subsets stay screened
+    grid = [f"{a}/{100 - a}" for a in range(0, 101, 10)]
+    winners = best_per_recording(
+        rescore_table(fast.results_, "subset", grid), "subset", tie_breaker="n_features"
+    )
+    exact = merged[~merged["screened"]]
+    assert set(winners["subset"]) <= set(exact["subset"])
+    np.testing.assert_array_equal(exact["accuracy"], exact["accuracy_f"])
+    np.testing.assert_array_equal(exact["smoothness"], exact["smoothness_f"])
+    assert merged["screened"].any()
 
 
 def test_the_fast_forward_search_starts_from_the_full_search_first_step(searched):
@@ -141,6 +151,17 @@ def test_the_fast_forward_search_starts_from_the_full_search_first_step(searched
     # both paths take the same feature first
     first = [p[p["accepted"]]["feature"].iloc[0] for p in (full.paths_, fast.paths_)]
     assert first[0] == first[1]
+    # every step's best option (accepted or not) and the single features (the scales) are
+    # fitted as the full search fits them, to the bit, and read once in the table
+    results = fast.results_
+    assert not results.duplicated(["subset", "recording"]).any()
+    exact = results[~results["screened"]]
+    read = set(fast.paths_["subset"]) | {(f,) for f in FEATURES}
+    assert read <= set(exact["subset"])
+    merged = exact.merge(full.results_, on=["subset", "recording"], suffixes=("", "_f"))
+    assert len(merged) == len(exact)
+    np.testing.assert_array_equal(merged["accuracy"], merged["accuracy_f"])
+    np.testing.assert_array_equal(merged["smoothness"], merged["smoothness_f"])
 
 
 def test_an_estimator_the_fast_search_does_not_serve_is_searched_in_full(searched):

@@ -60,6 +60,10 @@ SEARCHES = ("fast", "full")
 SUBSET_ITERATIONS = 2
 #: EM iterations after every split of the state sweep's chain.
 STATE_ITERATIONS = 3
+#: A screened subset is fitted in full when its performance score is within this share of a
+#: recording's best (the selector's ``settle``): the per-recording winners are then read
+#: from full fits wherever the screening's error is below it.
+NEAR_TIE = 0.01
 #: Screened models per task: the per-task cost (reading the fold, a worker's start) is
 #: spread over them, and the last tasks stay short.
 BATCH_SIZE = 8
