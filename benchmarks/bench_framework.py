@@ -60,6 +60,7 @@ from skhmmgmr.selection import candidate_subsets
 from skhmmgmr.selection._framework_data import sampling_period_of, split_recordings_table
 from skhmmgmr.selection._search import _screening
 from skhmmgmr.selection._search._score_tables import best_per_recording, rescore_table
+from skhmmgmr.selection._sources import source_tables
 
 DEFAULT_CACHE = os.path.join(os.path.expanduser("~"), ".cache", "skhmmgmr-benchmarks")
 
@@ -350,6 +351,13 @@ def load_tables(path):
     wall = tables.pop("wall_s", None)
     if wall is None:
         wall = sum(tables["timings"].values())
+    if "sources" in tables:  # the report's properties, from the fitted sources
+        source = {}
+        for name, selector in tables["sources"].items():
+            source.update(source_tables(name, selector))
+        tables.setdefault("source_tables", source)
+        tables.setdefault("exhaustive", source.get("exhaustive_results"))
+        tables.setdefault("forward_paths", source.get("forward_paths"))
     return types.SimpleNamespace(**tables), wall
 
 

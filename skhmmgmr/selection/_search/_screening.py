@@ -63,7 +63,7 @@ STATE_ITERATIONS = 3
 #: A screened subset is fitted in full when its performance score is within this share of a
 #: recording's best (the selector's ``settle``): the per-recording winners are then read
 #: from full fits wherever the screening's error is below it.
-NEAR_TIE = 0.01
+NEAR_TIE = 0.005
 #: Screened models per task: the per-task cost (reading the fold, a worker's start) is
 #: spread over them, and the last tasks stay short.
 BATCH_SIZE = 8
