@@ -574,6 +574,13 @@ def main(argv=None):
         default=None,
         help="with --searches: read the full search of an earlier --save folder, not run it",
     )
+    parser.add_argument(
+        "--near-tie",
+        type=float,
+        default=None,
+        help="the fast search fits in full the near-ties within this share (e.g. 0.005) of "
+        "what the wrappers' decisions read (default: off)",
+    )
     parser.add_argument("--skip-reference", action="store_true")
     parser.add_argument("--skip-peer", action="store_true")
     parser.add_argument("--save", default=None, help="directory for the selection tables")
@@ -583,6 +590,7 @@ def main(argv=None):
         help="compare with the saved tables of an earlier reference run instead of running it",
     )
     args = parser.parse_args(argv)
+    _screening.NEAR_TIE = args.near_tie
     if args.scale:
         return run_scale(
             n_drivers=args.drivers,

@@ -60,10 +60,14 @@ SEARCHES = ("fast", "full")
 SUBSET_ITERATIONS = 2
 #: EM iterations after every split of the state sweep's chain.
 STATE_ITERATIONS = 3
-#: A screened subset is fitted in full when its performance score is within this share of a
-#: recording's best (the selector's ``settle``): the per-recording winners are then read
-#: from full fits wherever the screening's error is below it.
-NEAR_TIE = 0.005
+#: When set (a share, e.g. 0.005), the wrappers fit in full every screened subset whose
+#: performance score is within this share of what a decision reads (a recording's best in the
+#: exhaustive wrapper, a path's best option in the forward one): the decisions are then read
+#: from full fits wherever the screening's error is below it. Off (``None``): at the thesis'
+#: scale it gave seed 0 the full search's answers at 0.005 but fitted a third of the subsets
+#: in full, and the fast search was no longer faster (``benchmarks/bench_framework.py
+#: --near-tie``, the selection page of the user guide).
+NEAR_TIE = None
 #: Screened models per task: the per-task cost (reading the fold, a worker's start) is
 #: spread over them, and the last tasks stay short.
 BATCH_SIZE = 8

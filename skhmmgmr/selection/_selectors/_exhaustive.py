@@ -18,6 +18,7 @@ from sklearn.utils.validation import check_is_fitted
 from ..._core._compat import Interval, _fit_context
 from ..._core._docstrings import fill_shared_parameters
 from ...metrics._scores import trade_offs as all_trade_offs
+from .._search import _screening
 from .._search._score_tables import (
     best_on_average,
     best_per_recording,
@@ -25,7 +26,6 @@ from .._search._score_tables import (
     near_best,
     rescore_table,
 )
-from .._search._screening import NEAR_TIE
 from .._search.base import RecordingSelector
 
 
@@ -142,15 +142,23 @@ class ExhaustiveFeatureSelector(RecordingSelector):
         ]
         trade_offs = [*all_trade_offs(10), *labels_of(self._trade_off)]
 
+        near_tie = _screening.NEAR_TIE
+
         def settle(table):
             # the fast search fits in full every recording's best subset and its near-ties, at
             # every trade-off of a 10 % grid: the per-recording winners relevance counts
             scores = rescore_table(table, "model", trade_offs)
-            return near_best(scores, "model", NEAR_TIE)
+            return near_best(scores, "model", near_tie)
 
         with self._searching(X, y, groups, splits):
             self.results_ = self._evaluate_subsets(
-                X, y, groups, splits, subsets, "feature subsets", settle=settle
+                X,
+                y,
+                groups,
+                splits,
+                subsets,
+                "feature subsets",
+                settle=None if near_tie is None else settle,
             )
         best = self.best_subsets(self._trade_off, per_recording=False)
         self.subset_ = best["subset"].iloc[0]

@@ -14,8 +14,8 @@ from sklearn.utils.validation import check_is_fitted
 from ..._core._compat import Interval, StrOptions, _fit_context
 from ..._core._docstrings import fill_shared_parameters
 from ...metrics._table import parse_trade_offs
+from .._search import _screening
 from .._search._score_tables import labels_of
-from .._search._screening import NEAR_TIE
 from .._search.base import RecordingSelector
 from ._forward_paths import ForwardPath, FrozenScores, paths_table
 
@@ -160,13 +160,13 @@ class ForwardFeatureSelector(RecordingSelector):
 
         def confirm(active):
             # the fast search fits in full every path's best option and its near-ties, until
-            # the decisions read no screened score (NEAR_TIE: the screening's error)
+            # the decisions read no screened score (near_tie: the screening's error)
             while True:
                 needed = set()
                 for path, score_of in active:
                     options = path.candidates()
                     values = [score_of(s) for s in options]
-                    bound = min(values) * (1.0 + NEAR_TIE)
+                    bound = min(values) * (1.0 + near_tie)
                     needed.update(s for s, v in zip(options, values, strict=True) if v <= bound)
                 todo = sorted(needed - exact)
                 if not todo:
@@ -174,7 +174,8 @@ class ForwardFeatureSelector(RecordingSelector):
                 evaluate(todo, in_full=True)
 
         with self._searching(X, y, groups, splits):
-            fast = getattr(self, "_fast_search", None) is not None
+            near_tie = _screening.NEAR_TIE
+            fast = getattr(self, "_fast_search", None) is not None and near_tie is not None
             singles = [(j,) for j in range(n_features)]
             evaluate(singles)
             if fast:  # the scales every score is divided by, from full fits
