@@ -68,6 +68,7 @@ TORQUE_OPTIONS = {
     "friction_angle": "half-width [rad] of a play on the steering-wheel angle, the hysteresis "
     "input of a column whose friction sticks ('auto': none or several chosen on the training "
     "recordings; 'none': no hysteresis input)",
+    "angle_column": "column of the steering-wheel angle, the input of the plays",
     "load_columns": "columns whose signed powers are appended (the option alone: none)",
     "powers": "powers >= 2 appended for every load column",
     "velocity_filter": "time constant [s] of a causal low-pass filter on the velocity before "
@@ -125,9 +126,9 @@ def _model_to_fit(args, period):
             f"--velocity-filter needs the sampling period: give --sampling-period, or a time "
             f"column (--time, now {args.time!r})"
         )
-    friction_column = options.pop("friction_column")
+    columns = {name: options.pop(name) for name in ("friction_column", "angle_column")}
     pipe = make_torque_pipeline(args.n_states, sampling_period=period, **options, **common)
-    pipe.set_params(steering_features__friction_column=friction_column)
+    pipe.set_params(**{f"steering_features__{name}": value for name, value in columns.items()})
     return pipe
 
 
@@ -194,6 +195,7 @@ def _add_torque_options(parser):
         "friction_velocity": dict(type=checked_by(setting, SteeringFeatures, "friction_velocity")),
         "friction_column": {},
         "friction_angle": dict(type=checked_by(setting, SteeringFeatures, "friction_angle")),
+        "angle_column": {},
         "load_columns": dict(nargs="*"),
         "powers": dict(nargs="*", type=int),
         "velocity_filter": dict(type=checked_by(setting, SteeringFeatures, "velocity_filter")),
