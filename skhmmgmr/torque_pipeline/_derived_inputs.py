@@ -137,6 +137,12 @@ def hysteresis_input(angle, radius):
     return out
 
 
+def led_angle(angle, velocity, lead):
+    """The angle the plays read with ``angle_lead``: ``angle + lead * velocity`` (see
+    ``SteeringFeatures``)."""
+    return angle + lead * velocity
+
+
 def recording_hysteresis(angle, layout, radii):
     """The hysteresis inputs of rows in filter order (their recordings' ``layout``), the play
     restarted at every recording, by name."""

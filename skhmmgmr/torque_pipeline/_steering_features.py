@@ -10,6 +10,7 @@ the velocity filter, read from the time index of the training recordings when it
 given.
 """
 
+import math
 import numbers
 
 import numpy as np
@@ -32,6 +33,7 @@ from ._derived_inputs import (
     friction_names,
     friction_widths,
     hysteresis_names,
+    led_angle,
     load_inputs,
     recording_hysteresis,
 )
@@ -79,6 +81,15 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         A missing angle gives missing hysteresis inputs and leaves the plays alone.
     angle_column : str or int, default="steering_wheel_angle"
         The column holding the steering-wheel angle, for ``friction_angle``.
+    angle_lead : float, "auto" or None, default=None
+        Time [s] by which the plays read the angle ahead on the velocity: the plays of
+        ``friction_angle`` follow ``angle + angle_lead * velocity`` (the velocity of
+        ``friction_column``, unfiltered) instead of the angle. An angle sensor's resolution
+        (0.1 deg is usual) may be coarser than the twist over which a column that sticks
+        builds up its torque; the velocity, which an ECU derives from the angle and smooths,
+        places the angle between two of its steps. ``"auto"``: none (0), 0.02 or 0.05 s
+        (``ANGLE_LEADS``), chosen in ``fit`` with the plays. ``None`` (or 0): the angle
+        itself. Ignored without hysteresis inputs.
     friction_column : str or int, default="steering_wheel_velocity"
         The column holding the steering-wheel velocity (a name, or a position for arrays).
     load_columns : tuple of str or int, default=("steering_wheel_angle", "lateral_acceleration")
@@ -112,13 +123,16 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         one), or the ones chosen (``None``: no hysteresis input).
     velocity_filter_ : float or None
         The velocity filter's time constant the transform uses (``None``: no filter).
+    angle_lead_ : float or None
+        The time the plays read the angle ahead on the velocity (``None``: the angle itself,
+        always without hysteresis inputs).
     sampling_period_ : float or None
         The seconds between two rows the velocity filter uses: ``sampling_period``, or the
         one read from the time index in ``fit`` (``None``: unknown).
     friction_search_ : DataFrame or None
         The ``"auto"`` choice: one row per candidate, with ``friction_velocity`` (a width, a
         tuple of widths or None), ``friction_angle`` (a tuple of half-widths or None),
-        ``velocity_filter``, ``n_friction_inputs`` (friction and hysteresis inputs),
+        ``velocity_filter``, ``angle_lead``, ``n_friction_inputs`` (friction and hysteresis inputs),
         ``validation_rmse`` (held-out root mean squared error of the linear fit, in the
         target's unit) and ``chosen``; ``None`` without an ``"auto"`` setting.
     n_features_in_ : int
@@ -186,6 +200,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             None,
         ],
         "sampling_period": [Interval(numbers.Real, 0, None, closed="neither"), None],
+        "angle_lead": [Interval(numbers.Real, None, None, closed="neither"), StrOptions({AUTO}), None],
     }
 
     def __init__(
@@ -198,6 +213,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         sampling_period=None,
         friction_angle=None,
         angle_column="steering_wheel_angle",
+        angle_lead=None,
     ):
         self.friction_velocity = friction_velocity
         self.friction_column = friction_column
@@ -207,6 +223,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         self.sampling_period = sampling_period
         self.friction_angle = friction_angle
         self.angle_column = angle_column
+        self.angle_lead = angle_lead
 
     __metadata_request__fit = {"groups": True}
     __metadata_request__transform = {"groups": True}
@@ -216,9 +233,16 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         if "n_features_in_" in state and "sampling_period_" not in state:
             state = {**state, "sampling_period_": state.get("sampling_period")}
         # one pickled before the hysteresis inputs existed had none
-        state = {"friction_angle": None, "angle_column": "steering_wheel_angle", **state}
+        state = {
+            "friction_angle": None,
+            "angle_column": "steering_wheel_angle",
+            "angle_lead": None,
+            **state,
+        }
         if "n_features_in_" in state and "friction_angle_" not in state:
             state["friction_angle_"] = None
+        if "n_features_in_" in state and "angle_lead_" not in state:
+            state["angle_lead_"] = None
         super().__setstate__(state)
 
     @_fit_context(prefer_skip_nested_validation=True)
@@ -246,11 +270,12 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         values = validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
         self.friction_velocity_ = _as_setting(self.friction_velocity)
         self.friction_angle_ = _as_radii(self.friction_angle)
+        self.angle_lead_ = _as_lead(self.angle_lead, self.friction_angle_)
         self._check_inputs()
         self.velocity_filter_ = None if self.friction_velocity is None else self.velocity_filter
         self.sampling_period_ = self.sampling_period
         self.friction_search_ = None
-        searched = AUTO in (self.friction_velocity_, self.velocity_filter_, self.friction_angle_)
+        searched = AUTO in self._learned()
         if searched and y is None:
             raise ValueError(
                 f"{self._settings()}: an 'auto' setting is chosen on the target, so fit needs "
@@ -275,7 +300,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
                     "seconds between two rows), or X with a 'time' index level to read it "
                     "from; got sampling_period=None."
                 )
-        if AUTO not in (self.friction_velocity_, self.velocity_filter_, self.friction_angle_):
+        if AUTO not in self._learned():
             return
         self.friction_search_ = candidate_table(
             self, layout, values, y, self._sources(), self._settings()
@@ -284,17 +309,22 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         self.friction_velocity_ = _as_setting(chosen["friction_velocity"])
         self.friction_angle_ = _as_radii(chosen["friction_angle"])
         self.velocity_filter_ = chosen["velocity_filter"]
+        self.angle_lead_ = _as_lead(chosen["angle_lead"], self.friction_angle_)
         if self.friction_velocity_ is None:
             self.velocity_filter_ = None
         elif self.velocity_filter_ is not None:
             self.velocity_filter_ = float(self.velocity_filter_)
+
+    def _learned(self):
+        """The settings ``fit`` may choose, as they stand (``"auto"`` before the choice)."""
+        return (self.friction_velocity_, self.velocity_filter_, self.friction_angle_, self.angle_lead_)
 
     def _settings(self):
         """The settings searched, as the errors name them."""
         return (
             f"friction_velocity={self.friction_velocity!r}, "
             f"velocity_filter={self.velocity_filter!r}, "
-            f"friction_angle={self.friction_angle!r}"
+            f"friction_angle={self.friction_angle!r}, angle_lead={self.angle_lead!r}"
         )
 
     def _check_parameters(self):
@@ -313,6 +343,11 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             check_widths(self.friction_velocity, "friction_velocity", friction_names)
         if isinstance(self.friction_angle, tuple | list):
             check_widths(self.friction_angle, "friction_angle", hysteresis_names)
+        for name in ("friction_velocity", "velocity_filter", "sampling_period", "angle_lead"):
+            value = getattr(self, name)
+            real = isinstance(value, numbers.Real) and not isinstance(value, bool)
+            if real and not math.isfinite(value):
+                raise ValueError(f"{name} must be a finite number; got {name}={value!r}.")
 
     def _check_inputs(self):
         """The fitted inputs hold the source columns and none of the derived ones."""
@@ -385,6 +420,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             derived.update(friction_inputs(velocity, self.friction_velocity_))
         if self.friction_angle_ is not None:
             angle = values[:, positions[self.angle_column]]
+            if self.angle_lead_ is not None:
+                angle = led_angle(angle, values[:, positions[self.friction_column]], self.angle_lead_)
             plays = in_filter_order(self._play_in_filter_order, X, groups, rows={"angle": angle})
             derived.update(zip(hysteresis_names(self.friction_angle_), plays.T, strict=True))
         derived.update(load_inputs(values, positions, self.load_columns, self.powers))
@@ -455,6 +492,9 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             (``None`` without the filter), and ``sampling_period`` (``sampling_period_``);
             ``angle_position`` (the angle's position in the row, ``None`` without hysteresis
             inputs) and ``friction_angle`` (the list of the plays' half-widths);
+            ``angle_lead`` (``None``: the plays read the angle) and ``lead_position`` (the
+            velocity's position in the row, ``None`` without a lead): the plays read
+            ``angle + angle_lead * velocity``;
             ``load_positions`` (the load columns' positions) and ``powers``.
 
         Examples
@@ -492,6 +532,10 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             else float(self.sampling_period_),
             "angle_position": None if radii is None else positions[self.angle_column],
             "friction_angle": None if radii is None else [float(r) for r in radii],
+            "angle_lead": None if self.angle_lead_ is None else float(self.angle_lead_),
+            "lead_position": None
+            if self.angle_lead_ is None
+            else positions[self.friction_column],
             "load_positions": [positions[column] for column in self.load_columns],
             "powers": [int(power) for power in self.powers],
         }
@@ -510,7 +554,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         needed = list(self.load_columns)
         if self.friction_angle is not None:
             needed.insert(0, self.angle_column)
-        if self.friction_velocity is not None:
+        led = self.angle_lead is not None and self.friction_angle is not None
+        if self.friction_velocity is not None or led:
             needed.insert(0, self.friction_column)
         names = getattr(self, "feature_names_in_", None)
         positions, missing = {}, []
@@ -555,7 +600,7 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
         caller_name="SteeringFeatures",
     )
     step._check_parameters()
-    for name in ("friction_velocity", "velocity_filter", "friction_angle"):
+    for name in ("friction_velocity", "velocity_filter", "friction_angle", "angle_lead"):
         if isinstance(params.get(name), str) and params[name] == AUTO:
             raise ValueError(
                 f"{name}='auto' is a setting to fit; a fitted step holds the chosen value."
@@ -567,6 +612,7 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
         )
     step.friction_velocity_ = _as_setting(step.friction_velocity)
     step.friction_angle_ = _as_radii(step.friction_angle)
+    step.angle_lead_ = _as_lead(step.angle_lead, step.friction_angle_)
     step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
     step.sampling_period_ = step.sampling_period
     step.friction_search_ = None
@@ -591,3 +637,11 @@ def _as_radii(radii):
     if radii is None or isinstance(radii, str):
         return radii
     return (float(radii),)
+
+
+def _as_lead(lead, radii):
+    """An ``angle_lead`` as the fitted step holds it: a float, ``"auto"``, or ``None`` for the
+    angle itself (a lead of 0, or no plays)."""
+    if lead is None or radii is None or (not isinstance(lead, str) and lead == 0):
+        return None
+    return lead if isinstance(lead, str) else float(lead)
