@@ -347,7 +347,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             value = getattr(self, name)
             real = isinstance(value, numbers.Real) and not isinstance(value, bool)
             if real and not math.isfinite(value):
-                raise ValueError(f"{name} must be a finite number; got {name}={value!r}.")
+                raise ValueError(f"{name} must be finite; got {name}={value!r}.")
 
     def _check_inputs(self):
         """The fitted inputs hold the source columns and none of the derived ones."""
