@@ -635,13 +635,17 @@ def test_the_plays_read_the_angle_led_on_the_velocity():
     data.loc[[5, 250], "steering_wheel_velocity"] = np.nan
     radii, lead = (0.002, 0.008), 0.03
     step = SteeringFeatures(friction_velocity=None, load_columns=(), friction_angle=radii)
-    derived = step.set_params(angle_lead=lead).fit_transform(data[COLUMNS], groups=data["recording"])
+    derived = step.set_params(angle_lead=lead).fit_transform(
+        data[COLUMNS], groups=data["recording"]
+    )
     for recording in pd.unique(data["recording"]):
         rows = (data["recording"] == recording).to_numpy()
         led = data.loc[rows, COLUMNS[0]] + lead * data.loc[rows, COLUMNS[1]]
         for r in radii:
             expected = _plain_play(led.to_numpy(), r)
-            np.testing.assert_array_equal(derived.loc[rows, f"steering_hysteresis_{r:.3g}"], expected)
+            np.testing.assert_array_equal(
+                derived.loc[rows, f"steering_hysteresis_{r:.3g}"], expected
+            )
     assert np.isnan(derived.loc[[5, 250], "steering_hysteresis_0.002"]).all()
     unled = step.set_params(angle_lead=0.0).fit_transform(data[COLUMNS], groups=data["recording"])
     assert step.angle_lead_ is None  # a lead of 0 is the angle itself

@@ -200,7 +200,11 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             None,
         ],
         "sampling_period": [Interval(numbers.Real, 0, None, closed="neither"), None],
-        "angle_lead": [Interval(numbers.Real, None, None, closed="neither"), StrOptions({AUTO}), None],
+        "angle_lead": [
+            Interval(numbers.Real, None, None, closed="neither"),
+            StrOptions({AUTO}),
+            None,
+        ],
     }
 
     def __init__(
@@ -317,7 +321,12 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
 
     def _learned(self):
         """The settings ``fit`` may choose, as they stand (``"auto"`` before the choice)."""
-        return (self.friction_velocity_, self.velocity_filter_, self.friction_angle_, self.angle_lead_)
+        return (
+            self.friction_velocity_,
+            self.velocity_filter_,
+            self.friction_angle_,
+            self.angle_lead_,
+        )
 
     def _settings(self):
         """The settings searched, as the errors name them."""
@@ -421,7 +430,9 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         if self.friction_angle_ is not None:
             angle = values[:, positions[self.angle_column]]
             if self.angle_lead_ is not None:
-                angle = led_angle(angle, values[:, positions[self.friction_column]], self.angle_lead_)
+                angle = led_angle(
+                    angle, values[:, positions[self.friction_column]], self.angle_lead_
+                )
             plays = in_filter_order(self._play_in_filter_order, X, groups, rows={"angle": angle})
             derived.update(zip(hysteresis_names(self.friction_angle_), plays.T, strict=True))
         derived.update(load_inputs(values, positions, self.load_columns, self.powers))
@@ -533,9 +544,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             "angle_position": None if radii is None else positions[self.angle_column],
             "friction_angle": None if radii is None else [float(r) for r in radii],
             "angle_lead": None if self.angle_lead_ is None else float(self.angle_lead_),
-            "lead_position": None
-            if self.angle_lead_ is None
-            else positions[self.friction_column],
+            "lead_position": None if self.angle_lead_ is None else positions[self.friction_column],
             "load_positions": [positions[column] for column in self.load_columns],
             "powers": [int(power) for power in self.powers],
         }
