@@ -254,3 +254,27 @@ def check_widths(widths, parameter, names_of):
             f"{parameter}={widths!r} repeats a width (to three significant digits, which "
             f"name the inputs: {names})."
         )
+
+
+def fitted_friction(friction):
+    """A ``friction_velocity`` as the fitted step holds it: a basis as a tuple of floats."""
+    if isinstance(friction, tuple | list):
+        return friction_widths(friction)
+    return friction
+
+
+def fitted_radii(radii):
+    """A ``friction_angle`` as the fitted step holds it: a tuple of floats (or None, "auto")."""
+    if isinstance(radii, tuple | list):
+        return tuple(float(r) for r in radii)
+    if radii is None or isinstance(radii, str):
+        return radii
+    return (float(radii),)
+
+
+def fitted_lead(lead, radii):
+    """An ``angle_lead`` as the fitted step holds it: a float, ``"auto"``, or ``None`` for the
+    angle itself (a lead of 0, or no plays)."""
+    if lead is None or radii is None or (not isinstance(lead, str) and lead == 0):
+        return None
+    return lead if isinstance(lead, str) else float(lead)

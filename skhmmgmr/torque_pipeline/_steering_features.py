@@ -18,7 +18,7 @@ import pandas as pd
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._core._compat import Interval, StrOptions, _fit_context, validate_parameter_constraints
+from .._core._compat import Interval, StrOptions, _fit_context
 from .._core._docstrings import fill_shared_parameters
 from .._core._panel import in_filter_order
 from .._core._pickled import PickleVersionMixin
@@ -29,6 +29,9 @@ from ._derived_inputs import (
     derived_units,
     filter_decay,
     filtered_velocity,
+    fitted_friction,
+    fitted_lead,
+    fitted_radii,
     friction_inputs,
     friction_names,
     friction_widths,
@@ -237,12 +240,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         if "n_features_in_" in state and "sampling_period_" not in state:
             state = {**state, "sampling_period_": state.get("sampling_period")}
         # one pickled before the hysteresis inputs existed had none
-        state = {
-            "friction_angle": None,
-            "angle_column": "steering_wheel_angle",
-            "angle_lead": None,
-            **state,
-        }
+        state = {"friction_angle": None, "angle_column": "steering_wheel_angle", **state}
+        state = {"angle_lead": None, **state}
         if "n_features_in_" in state and "friction_angle_" not in state:
             state["friction_angle_"] = None
         if "n_features_in_" in state and "angle_lead_" not in state:
@@ -272,9 +271,9 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         """
         self._check_parameters()
         values = validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
-        self.friction_velocity_ = _as_setting(self.friction_velocity)
-        self.friction_angle_ = _as_radii(self.friction_angle)
-        self.angle_lead_ = _as_lead(self.angle_lead, self.friction_angle_)
+        self.friction_velocity_ = fitted_friction(self.friction_velocity)
+        self.friction_angle_ = fitted_radii(self.friction_angle)
+        self.angle_lead_ = fitted_lead(self.angle_lead, self.friction_angle_)
         self._check_inputs()
         self.velocity_filter_ = None if self.friction_velocity is None else self.velocity_filter
         self.sampling_period_ = self.sampling_period
@@ -310,10 +309,10 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             self, layout, values, y, self._sources(), self._settings()
         )
         chosen = self.friction_search_[self.friction_search_["chosen"]].iloc[0]
-        self.friction_velocity_ = _as_setting(chosen["friction_velocity"])
-        self.friction_angle_ = _as_radii(chosen["friction_angle"])
+        self.friction_velocity_ = fitted_friction(chosen["friction_velocity"])
+        self.friction_angle_ = fitted_radii(chosen["friction_angle"])
         self.velocity_filter_ = chosen["velocity_filter"]
-        self.angle_lead_ = _as_lead(chosen["angle_lead"], self.friction_angle_)
+        self.angle_lead_ = fitted_lead(chosen["angle_lead"], self.friction_angle_)
         if self.friction_velocity_ is None:
             self.velocity_filter_ = None
         elif self.velocity_filter_ is not None:
@@ -523,7 +522,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         check_is_fitted(self, "n_features_in_")
         positions = self._sources()
         names = getattr(self, "feature_names_in_", None)
-        friction, radii = self.friction_velocity_, self.friction_angle_
+        friction, radii, lead = self.friction_velocity_, self.friction_angle_, self.angle_lead_
         filtered = friction is not None and self.velocity_filter_ is not None
         if isinstance(friction, tuple):
             friction = list(friction_widths(friction))
@@ -543,8 +542,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             else float(self.sampling_period_),
             "angle_position": None if radii is None else positions[self.angle_column],
             "friction_angle": None if radii is None else [float(r) for r in radii],
-            "angle_lead": None if self.angle_lead_ is None else float(self.angle_lead_),
-            "lead_position": None if self.angle_lead_ is None else positions[self.friction_column],
+            "angle_lead": None if lead is None else float(lead),
+            "lead_position": None if lead is None else positions[self.friction_column],
             "load_positions": [positions[column] for column in self.load_columns],
             "powers": [int(power) for power in self.powers],
         }
@@ -597,60 +596,3 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         tags.input_tags.allow_nan = True
         tags.requires_fit = True
         return tags
-
-
-def restore_steering_features(params, n_features_in, feature_names_in=None):
-    """A fitted :class:`SteeringFeatures` from its parameters and fitted facts (a step of the
-    portable model file), refused as ``fit`` would refuse them."""
-    step = SteeringFeatures(**params)
-    validate_parameter_constraints(
-        SteeringFeatures._parameter_constraints,
-        step.get_params(deep=False),
-        caller_name="SteeringFeatures",
-    )
-    step._check_parameters()
-    for name in ("friction_velocity", "velocity_filter", "friction_angle", "angle_lead"):
-        if isinstance(params.get(name), str) and params[name] == AUTO:
-            raise ValueError(
-                f"{name}='auto' is a setting to fit; a fitted step holds the chosen value."
-            )
-    if step.velocity_filter is not None and step.sampling_period is None:
-        raise ValueError(
-            f"velocity_filter={step.velocity_filter!r} needs sampling_period (the seconds "
-            "between two rows); got sampling_period=None."
-        )
-    step.friction_velocity_ = _as_setting(step.friction_velocity)
-    step.friction_angle_ = _as_radii(step.friction_angle)
-    step.angle_lead_ = _as_lead(step.angle_lead, step.friction_angle_)
-    step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
-    step.sampling_period_ = step.sampling_period
-    step.friction_search_ = None
-    step.n_features_in_ = n_features_in
-    if feature_names_in is not None:
-        step.feature_names_in_ = np.asarray(feature_names_in, dtype=object)
-    step._check_inputs()
-    return step
-
-
-def _as_setting(friction):
-    """A ``friction_velocity`` as the fitted step holds it: a basis as a tuple of floats."""
-    if isinstance(friction, tuple | list):
-        return friction_widths(friction)
-    return friction
-
-
-def _as_radii(radii):
-    """A ``friction_angle`` as the fitted step holds it: a tuple of floats (or None, "auto")."""
-    if isinstance(radii, tuple | list):
-        return tuple(float(r) for r in radii)
-    if radii is None or isinstance(radii, str):
-        return radii
-    return (float(radii),)
-
-
-def _as_lead(lead, radii):
-    """An ``angle_lead`` as the fitted step holds it: a float, ``"auto"``, or ``None`` for the
-    angle itself (a lead of 0, or no plays)."""
-    if lead is None or radii is None or (not isinstance(lead, str) and lead == 0):
-        return None
-    return lead if isinstance(lead, str) else float(lead)
