@@ -5,7 +5,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from skhmmgmr import HMMGMRRegressor, portable
+from skhmmgmr import HMMGMRRegressor, make_torque_pipeline, portable
 from skhmmgmr.cli import main
 from skhmmgmr.datasets import make_lane_keeping
 from skhmmgmr.metrics import evaluate_recordings
@@ -189,3 +189,39 @@ def test_fit_takes_the_read_out_of_the_torque_pipeline(files, capsys, given, exp
         assert regressor.output_smoothing_ == 0.0
     out = capsys.readouterr().out
     assert f"read-out time constant {regressor.output_smoothing_:g} rows" in out
+
+
+def test_fit_reads_the_plays_and_the_friction_from_renamed_columns(files, capsys):
+    """A user's recordings name the wheel's angle and velocity their own way: --angle-column
+    and --friction-column say which columns the plays and the friction read."""
+    renames = {"steering_wheel_angle": "swa", "steering_wheel_velocity": "swv"}
+    data = files["data"].rename(columns=renames)
+    path = files["folder"] / "renamed.csv"
+    data.to_csv(path, index=False)
+    model = files["folder"] / "renamed.json"
+    inputs = [renames.get(name, name) for name in INPUTS]
+    argv = ["fit", str(path), "--target", TARGET, "--n-states", "2", "--features", *inputs]
+    argv += ["--pipeline", "torque", "--friction-angle", "0.01", "--angle-column", "swa"]
+    argv += ["--friction-column", "swv", "--load-columns", "swa", "lateral_acceleration"]
+    argv += ["--output", str(model)]
+    assert main(["--quiet", *argv]) == 0
+    pipe = portable.load(model)
+    features = pipe[0]
+    assert (features.angle_column, features.friction_column) == ("swa", "swv")
+    names = list(features.get_feature_names_out())
+    assert any(name.startswith("steering_friction") for name in names)
+    assert "steering_hysteresis_0.01" in names
+    original = files["data"]
+    by_api = make_torque_pipeline(
+        2, friction_angle=0.01, sampling_period=features.sampling_period, random_state=0
+    ).fit(original[INPUTS], original[TARGET], groups=original["recording"])
+    np.testing.assert_allclose(
+        pipe.predict(data[inputs], groups=data["recording"]),
+        by_api.predict(original[INPUTS], groups=original["recording"]),
+        rtol=0,
+        atol=1e-12,
+    )
+    argv[argv.index("--angle-column") + 1] = "wheel"
+    argv[-1] = str(files["folder"] / "refused.json")
+    assert main(["--quiet", *argv]) == 2
+    assert "['wheel'] (friction_column / angle_column" in capsys.readouterr().err

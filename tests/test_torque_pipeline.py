@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import sklearn
+import sklearn.base
 from sklearn.model_selection import GridSearchCV, GroupKFold
 
 from skhmmgmr import (
@@ -432,6 +433,57 @@ def test_groups_are_routed_alike_with_metadata_routing_on():
     with sklearn.config_context(enable_metadata_routing=True):
         on = _filtered_pipeline().fit(X, y, groups=groups).predict(X, groups=groups)
     np.testing.assert_allclose(on, off, rtol=0, atol=1e-12)
+
+
+class _RecordingCentring(sklearn.base.TransformerMixin, sklearn.base.BaseEstimator):
+    """A step of another library: centres every input within each recording, with pandas
+    (``unique`` and ``groupby`` refuse anything but an array or a pandas object)."""
+
+    def fit(self, X, y=None, groups=None):
+        self.recordings_ = None if groups is None else list(pd.unique(groups))
+        return self
+
+    def fit_transform(self, X, y=None, groups=None):
+        return self.fit(X, y, groups).transform(X, groups)
+
+    def transform(self, X, groups=None):
+        if groups is None:
+            return X
+        return X - X.groupby(np.asarray(groups)).transform("mean").set_axis(X.index)
+
+
+def _with_centring(step):
+    pipeline = make_torque_pipeline(2, friction_angle=None, random_state=0, n_iter=10)
+    pipeline.steps.insert(0, ("centring", step))
+    return pipeline
+
+
+def test_a_step_of_another_library_gets_no_groups_with_routing_off(recordings):
+    """With routing off nobody can set a request: a step that leaves it unset gets no
+    ``groups``, as from scikit-learn's Pipeline (it raised UnsetMetadataPassedError)."""
+    X, y, groups = recordings
+    pipeline = _with_centring(_RecordingCentring()).fit(X, y, groups=groups)
+    assert pipeline[0].recordings_ is None
+    plain = make_torque_pipeline(2, friction_angle=None, random_state=0, n_iter=10)
+    expected = plain.fit(X, y, groups=groups).predict(X, groups=groups)
+    np.testing.assert_array_equal(pipeline.predict(X, groups=groups), expected)
+
+
+def test_a_step_of_another_library_gets_the_recording_ids_with_routing_on(recordings):
+    X, y, groups = recordings
+    shuffled = np.random.default_rng(0).permutation(pd.unique(groups))
+    rows = np.concatenate([np.flatnonzero(groups == rec) for rec in shuffled])
+    X, y, groups = X.iloc[rows], y[rows], groups.iloc[rows]
+    with sklearn.config_context(enable_metadata_routing=True):
+        step = _RecordingCentring().set_fit_request(groups=True).set_transform_request(groups=True)
+        pipeline = _with_centring(step).fit(X, y, groups=groups)
+        estimate = pipeline.predict(X, groups=groups)
+    # the fit reads the recordings in the order of their ids, as every fit of the package
+    assert pipeline[0].recordings_ == sorted(shuffled)
+    centred = X - X.groupby(groups.to_numpy()).transform("mean")
+    by_hand = make_torque_pipeline(2, friction_angle=None, random_state=0, n_iter=10)
+    by_hand.fit(centred, y, groups=groups)
+    np.testing.assert_allclose(estimate, by_hand.predict(centred, groups=groups), atol=1e-12)
 
 
 def test_the_performance_score_predicts_the_pipeline_once(monkeypatch):

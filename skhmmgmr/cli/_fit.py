@@ -68,6 +68,7 @@ TORQUE_OPTIONS = {
     "friction_angle": "half-width [rad] of a play on the steering-wheel angle, the hysteresis "
     "input of a column whose friction sticks ('auto': none or several chosen on the training "
     "recordings; 'none': no hysteresis input)",
+    "angle_column": "column of the steering-wheel angle, the input of the plays",
     "angle_lead": "time [s] by which the plays read the angle ahead on the velocity, angle + "
     "lead * velocity ('auto': none, 0.02 or 0.05 s chosen on the training recordings; 'none': "
     "the angle itself)",
@@ -128,9 +129,9 @@ def _model_to_fit(args, period):
             f"--velocity-filter needs the sampling period: give --sampling-period, or a time "
             f"column (--time, now {args.time!r})"
         )
-    friction_column = options.pop("friction_column")
+    columns = {name: options.pop(name) for name in ("friction_column", "angle_column")}
     pipe = make_torque_pipeline(args.n_states, sampling_period=period, **options, **common)
-    pipe.set_params(steering_features__friction_column=friction_column)
+    pipe.set_params(**{f"steering_features__{name}": value for name, value in columns.items()})
     return pipe
 
 
@@ -199,6 +200,7 @@ def _add_torque_options(parser):
         "friction_velocity": dict(type=checked_by(setting, SteeringFeatures, "friction_velocity")),
         "friction_column": {},
         "friction_angle": dict(type=checked_by(setting, SteeringFeatures, "friction_angle")),
+        "angle_column": {},
         "angle_lead": dict(type=checked_by(setting, SteeringFeatures, "angle_lead")),
         "load_columns": dict(nargs="*"),
         "powers": dict(nargs="*", type=int),

@@ -11,8 +11,9 @@ own methods, the steps run here, routed by the same requests (see ``_through_ste
 
 from functools import partial
 
+import numpy as np
 from sklearn.pipeline import Pipeline
-from sklearn.utils.metadata_routing import process_routing
+from sklearn.utils.metadata_routing import get_routing_for_object, process_routing
 from sklearn.utils.metaestimators import available_if
 from sklearn.utils.validation import check_is_fitted
 
@@ -44,6 +45,22 @@ def _n_rows(X):
     return X.shape[0] if hasattr(X, "shape") else len(X)
 
 
+def _consumes_groups(step, *methods):
+    """Whether ``step`` requests ``groups`` in one of ``methods`` by its own defaults (the
+    package's steps do). With metadata routing off nobody can set a request, so a step that
+    leaves it unset (any step of another library with a ``groups`` parameter) gets none, as
+    from scikit-learn's ``Pipeline``, instead of an error asking for ``set_fit_request``,
+    which routing off refuses."""
+    routing = get_routing_for_object(step)
+    return any(routing.consumes(method, ["groups"]) for method in methods)
+
+
+def _reads_layouts(step):
+    """Whether the step reads a :class:`~skhmmgmr._core._panel.RecordingLayout` as its
+    ``groups`` (the package's steps do; another library's step gets the recording ids)."""
+    return isinstance(step, SteeringFeatures | HMMGMRRegressor)
+
+
 def _needs_recordings(step):
     """Whether the step's output depends on where recordings begin (a filter or plays over
     the rows, or a choice of them)."""
@@ -69,6 +86,10 @@ class TorquePipeline(PickleVersionMixin, Pipeline):
     ``<step>__groups`` that leaves out a step whose output depends on the recordings is
     refused, naming the step. Recordings in the
     index of a panel (:func:`skhmmgmr.datasets.to_panel`) reach every step as they are.
+    A step of another library gets ``groups`` when it requests them (routing on) as an array
+    of recording ids, the rows in the order the fit reads them (recordings in the order of
+    their ids); with routing off, where no request can be set, it gets none, as from a
+    scikit-learn ``Pipeline``.
 
     The regressor's own methods are the pipeline's, with the regressor's signatures and the
     recordings handed on alike: :meth:`predict` with ``return_std``,
@@ -114,7 +135,20 @@ class TorquePipeline(PickleVersionMixin, Pipeline):
         return in_filter_order(self._fit_in_filter_order, X, groups, y=y, canonical=True)
 
     def _fit_in_filter_order(self, layout, X, y=None):
-        return super().fit(X, y, **self._fit_params(X, layout.handed_down(), {}))
+        return super().fit(X, y, **self._fit_params(X, self._groups_for_steps(layout), {}))
+
+    def _groups_for_steps(self, layout):
+        """What the steps get as ``groups``: the handed-down layout, or the recording ids of
+        the rows (a plain array: ``pandas.unique``, ``groupby``...) when a step of another
+        library requests them."""
+        handed = layout.handed_down()
+        methods = ("fit", "fit_transform", "transform", *ROUTED_METHODS)
+        foreign = [
+            step
+            for _, step in self.steps
+            if not _reads_layouts(step) and _consumes_groups(step, *methods)
+        ]
+        return handed if handed is None or not foreign else np.asarray(handed)
 
     def _fit_params(self, X, groups, params):
         """``params`` with ``groups`` for every step that requests it, as scikit-learn's
@@ -124,10 +158,8 @@ class TorquePipeline(PickleVersionMixin, Pipeline):
         if groups is not None:
             if _routing_enabled():
                 return {**params, "groups": groups}
-            routing = process_routing(self, "fit", groups=groups)
-            for name, _ in self.steps:
-                methods = routing.get(name, {})
-                if any("groups" in methods.get(m, {}) for m in ("fit", "fit_transform")):
+            for name, step in self.steps:
+                if _consumes_groups(step, "fit", "fit_transform"):
                     params = {**params, f"{name}__groups": groups}
             return params
         given = [name for name, _ in self.steps if f"{name}__groups" in params]
@@ -175,7 +207,7 @@ class TorquePipeline(PickleVersionMixin, Pipeline):
 
     def _final_in_filter_order(self, method, args, params, layout, X, **rows):
         """:meth:`_final_method` on rows in filter order, their recordings' ``layout`` read."""
-        groups = layout.handed_down()
+        groups = self._groups_for_steps(layout)
         params = {**params, **{name: value for name, value in rows.items() if value is not None}}
         routed = method in ROUTED_METHODS and not OWN_PREDICT_PARAMETERS & params.keys()
         if routed and _routing_enabled():
@@ -192,18 +224,30 @@ class TorquePipeline(PickleVersionMixin, Pipeline):
         which step gets ``groups`` is still scikit-learn's routing (the requests of the
         steps, as ``predict`` routes them), and the final step's own method takes them as
         its own parameter."""
-        caller = method if method in ROUTED_METHODS else "predict"
-        routing = process_routing(self, caller, **({} if groups is None else {"groups": groups}))
+        routing = self._routing_of(method if method in ROUTED_METHODS else "predict", groups)
         Xt = X
         for name, step in self.steps[:-1]:
             if step is not None and step != "passthrough":
-                Xt = step.transform(Xt, **routing[name]["transform"])
+                Xt = step.transform(Xt, **routing(name, step, "transform"))
         name, final = self.steps[-1]
         if method in ROUTED_METHODS:
-            params = {**routing[name][method], **params}
+            params = {**routing(name, final, method), **params}
         elif groups is not None:
             params = {**params, "groups": groups}
         return getattr(final, method)(Xt, *args, **params)
+
+    def _routing_of(self, caller, groups):
+        """``routing(name, step, method)``: the metadata that ``method`` of the step gets in
+        the pipeline's ``caller``: scikit-learn's routing with routing on; with routing off,
+        ``groups`` for a step that requests them by default (:func:`_consumes_groups`)."""
+        if groups is None:
+            return lambda name, step, method: {}
+        if _routing_enabled():
+            routed = process_routing(self, caller, groups=groups)
+            return lambda name, step, method: routed[name][method]
+        return lambda name, step, method: (
+            {"groups": groups} if _consumes_groups(step, method) else {}
+        )
 
     @available_if(_final_step_has("predict_state_proba"))
     def predict_state_proba(self, X, groups=None, time=None):
