@@ -10,7 +10,6 @@ the velocity filter, read from the time index of the training recordings when it
 given.
 """
 
-import math
 import numbers
 
 import numpy as np
@@ -18,13 +17,13 @@ import pandas as pd
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._core._compat import Interval, StrOptions, _fit_context
+from .._core._compat import Interval, StrOptions, _fit_context, validate_parameter_constraints
 from .._core._docstrings import fill_shared_parameters
 from .._core._panel import in_filter_order
 from .._core._pickled import PickleVersionMixin
 from .._core._sequences import median_time_step
 from ._derived_inputs import (
-    check_widths,
+    check_settings,
     derived_names,
     derived_units,
     filter_decay,
@@ -33,7 +32,6 @@ from ._derived_inputs import (
     fitted_lead,
     fitted_radii,
     friction_inputs,
-    friction_names,
     friction_widths,
     hysteresis_names,
     led_angle,
@@ -41,6 +39,10 @@ from ._derived_inputs import (
     recording_hysteresis,
 )
 from ._friction_search import AUTO, RADIUS_GRID, WIDTH_GRID, candidate_table
+
+AUTO_OPTION = StrOptions({AUTO})
+#: The settings ``fit`` may choose.
+LEARNED = ("friction_velocity", "velocity_filter", "friction_angle", "angle_lead")
 
 
 @fill_shared_parameters
@@ -85,14 +87,10 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     angle_column : str or int, default="steering_wheel_angle"
         The column holding the steering-wheel angle, for ``friction_angle``.
     angle_lead : float, "auto" or None, default=None
-        Time [s] by which the plays read the angle ahead on the velocity: the plays of
-        ``friction_angle`` follow ``angle + angle_lead * velocity`` (the velocity of
-        ``friction_column``, unfiltered) instead of the angle. An angle sensor's resolution
-        (0.1 deg is usual) may be coarser than the twist over which a column that sticks
-        builds up its torque; the velocity, which an ECU derives from the angle and smooths,
-        places the angle between two of its steps. ``"auto"``: none (0), 0.02 or 0.05 s
-        (``ANGLE_LEADS``), chosen in ``fit`` with the plays. ``None`` (or 0): the angle
-        itself. Ignored without hysteresis inputs.
+        The plays follow ``angle + angle_lead * velocity`` (``friction_column``, unfiltered):
+        the velocity places an angle sensor's coarse steps (0.1 deg) within the twist of a
+        column that sticks. ``"auto"``: none, 0.02 or 0.05 s (``ANGLE_LEADS``), chosen in
+        ``fit`` with the plays. ``None`` (or 0): the angle itself.
     friction_column : str or int, default="steering_wheel_velocity"
         The column holding the steering-wheel velocity (a name, or a position for arrays).
     load_columns : tuple of str or int, default=("steering_wheel_angle", "lateral_acceleration")
@@ -127,8 +125,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     velocity_filter_ : float or None
         The velocity filter's time constant the transform uses (``None``: no filter).
     angle_lead_ : float or None
-        The time the plays read the angle ahead on the velocity (``None``: the angle itself,
-        always without hysteresis inputs).
+        The plays' lead on the velocity [s] (``None``: the angle itself, or no plays).
     sampling_period_ : float or None
         The seconds between two rows the velocity filter uses: ``sampling_period``, or the
         one read from the time index in ``fit`` (``None``: unknown).
@@ -203,11 +200,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             None,
         ],
         "sampling_period": [Interval(numbers.Real, 0, None, closed="neither"), None],
-        "angle_lead": [
-            Interval(numbers.Real, None, None, closed="neither"),
-            StrOptions({AUTO}),
-            None,
-        ],
+        "angle_lead": [Interval(numbers.Real, None, None, closed="neither"), AUTO_OPTION, None],
     }
 
     def __init__(
@@ -318,14 +311,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         elif self.velocity_filter_ is not None:
             self.velocity_filter_ = float(self.velocity_filter_)
 
-    def _learned(self):
-        """The settings ``fit`` may choose, as they stand (``"auto"`` before the choice)."""
-        return (
-            self.friction_velocity_,
-            self.velocity_filter_,
-            self.friction_angle_,
-            self.angle_lead_,
-        )
+    def _learned(self):  # the settings fit may choose ("auto" before the choice)
+        return tuple(getattr(self, f"{name}_") for name in LEARNED)
 
     def _settings(self):
         """The settings searched, as the errors name them."""
@@ -335,27 +322,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             f"friction_angle={self.friction_angle!r}, angle_lead={self.angle_lead!r}"
         )
 
-    def _check_parameters(self):
-        """What the parameters' constraints cannot say: the powers and the load columns."""
-        for power in self.powers:
-            if not isinstance(power, numbers.Integral) or isinstance(power, bool) or power < 2:
-                raise ValueError(
-                    f"powers must hold integers >= 2 (1 is the input itself); got {power!r} "
-                    f"in powers={self.powers!r}."
-                )
-        if len(set(self.powers)) != len(self.powers):
-            raise ValueError(f"powers={self.powers!r} repeats a power.")
-        if len(set(self.load_columns)) != len(self.load_columns):
-            raise ValueError(f"load_columns={self.load_columns!r} repeats a column.")
-        if isinstance(self.friction_velocity, tuple | list):
-            check_widths(self.friction_velocity, "friction_velocity", friction_names)
-        if isinstance(self.friction_angle, tuple | list):
-            check_widths(self.friction_angle, "friction_angle", hysteresis_names)
-        for name in ("friction_velocity", "velocity_filter", "sampling_period", "angle_lead"):
-            value = getattr(self, name)
-            real = isinstance(value, numbers.Real) and not isinstance(value, bool)
-            if real and not math.isfinite(value):
-                raise ValueError(f"{name} must be finite; got {name}={value!r}.")
+    def _check_parameters(self):  # what the parameters' constraints cannot say
+        check_settings(self)
 
     def _check_inputs(self):
         """The fitted inputs hold the source columns and none of the derived ones."""
@@ -502,9 +470,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             (``None`` without the filter), and ``sampling_period`` (``sampling_period_``);
             ``angle_position`` (the angle's position in the row, ``None`` without hysteresis
             inputs) and ``friction_angle`` (the list of the plays' half-widths);
-            ``angle_lead`` (``None``: the plays read the angle) and ``lead_position`` (the
-            velocity's position in the row, ``None`` without a lead): the plays read
-            ``angle + angle_lead * velocity``;
+            ``angle_lead`` and ``lead_position`` (the velocity's position; ``None``
+            without a lead): the plays read ``angle + angle_lead * velocity``;
             ``load_positions`` (the load columns' positions) and ``powers``.
 
         Examples
@@ -596,3 +563,36 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         tags.input_tags.allow_nan = True
         tags.requires_fit = True
         return tags
+
+
+def restore_steering_features(params, n_features_in, feature_names_in=None):
+    """A fitted :class:`SteeringFeatures` from its parameters and fitted facts (a step of the
+    portable model file), refused as ``fit`` would refuse them."""
+    step = SteeringFeatures(**params)
+    validate_parameter_constraints(
+        SteeringFeatures._parameter_constraints,
+        step.get_params(deep=False),
+        caller_name="SteeringFeatures",
+    )
+    step._check_parameters()
+    for name in ("friction_velocity", "velocity_filter", "friction_angle", "angle_lead"):
+        if isinstance(params.get(name), str) and params[name] == AUTO:
+            raise ValueError(
+                f"{name}='auto' is a setting to fit; a fitted step holds the chosen value."
+            )
+    if step.velocity_filter is not None and step.sampling_period is None:
+        raise ValueError(
+            f"velocity_filter={step.velocity_filter!r} needs sampling_period (the seconds "
+            "between two rows); got sampling_period=None."
+        )
+    step.friction_velocity_ = fitted_friction(step.friction_velocity)
+    step.friction_angle_ = fitted_radii(step.friction_angle)
+    step.angle_lead_ = fitted_lead(step.angle_lead, step.friction_angle_)
+    step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
+    step.sampling_period_ = step.sampling_period
+    step.friction_search_ = None
+    step.n_features_in_ = n_features_in
+    if feature_names_in is not None:
+        step.feature_names_in_ = np.asarray(feature_names_in, dtype=object)
+    step._check_inputs()
+    return step
