@@ -17,7 +17,11 @@ validation recordings (504,000 and 252,000 rows), 18 measured features.
    stage and their ratio, the EM fits of every stage (full fits, and screened models with
    their few EM iterations), and every selection compared (subset, K, the candidate subsets
    of every trade-off, the K of every trade-off, test accuracy and smoothness).
-4. **Slow reference path**: the same framework with :class:`_reference.ReferenceHMMGMR`, an EM
+4. **Scale** (``--scale``): both searches side by side as the data and the candidates grow:
+   the whole framework on the drivers of ``--drivers`` and on ``--scale-factor`` times as
+   many (rows), and the exhaustive stage alone (K=2, the Spearman filter's top ``n``) for
+   every ``n`` of ``--n-tops`` (candidate features): wall time and EM fits of both paths.
+5. **Slow reference path**: the same framework with :class:`_reference.ReferenceHMMGMR`, an EM
    built from sklearn.mixture's densities and hmmlearn's recursions (k-means on all rows), and
    a comparison of every selection: per-recording best subsets, relevance, candidates, the
    chosen subset and K.
@@ -28,6 +32,7 @@ Run::
     python benchmarks/bench_framework.py --skip-reference  # fast path and peer, ~10 minutes
     python benchmarks/bench_framework.py --searches --seeds 0 1 2   # search="fast" vs "full"
     python benchmarks/bench_framework.py --searches --drivers 3 --duration 60   # a quick look
+    python benchmarks/bench_framework.py --scale --scale-factor 4 --n-tops 10 12 14   # growth
 """
 
 import argparse
@@ -44,14 +49,18 @@ import pandas as pd
 from _data import thesis_protocol
 from _reference import PeerHMMGMR, ReferenceHMMGMR
 from sklearn.exceptions import ConvergenceWarning
+from sklearn.model_selection import PredefinedSplit
 from threadpoolctl import threadpool_limits
 
 from skhmmgmr import HMMGMRRegressor, select_parameters
 from skhmmgmr._core._schema import TARGET
+from skhmmgmr.feature_selection import ExhaustiveFeatureSelector, SpearmanSelector
 from skhmmgmr.metrics import evaluate_recordings
 from skhmmgmr.selection import candidate_subsets
+from skhmmgmr.selection._framework_data import sampling_period_of, split_recordings_table
 from skhmmgmr.selection._search import _screening
 from skhmmgmr.selection._search._score_tables import best_per_recording, rescore_table
+from skhmmgmr.selection._sources import source_tables
 
 DEFAULT_CACHE = os.path.join(os.path.expanduser("~"), ".cache", "skhmmgmr-benchmarks")
 
@@ -199,8 +208,11 @@ def compare_searches(full, fast):
     return result
 
 
-def run_searches(seeds, *, n_drivers, duration, n_jobs, cache, save=None):
-    """``search="full"`` and ``search="fast"`` side by side on the data of every seed."""
+def run_searches(seeds, *, n_drivers, duration, n_jobs, cache, save=None, full_tables=None):
+    """``search="full"`` and ``search="fast"`` side by side on the data of every seed;
+    ``full_tables``: a folder of an earlier run's saved tables (``--save``), whose full
+    search (``full_search_seed_<seed>.joblib``) is read instead of run again (the full path
+    does not depend on the fast one; its times are those of that run)."""
     results = {}
     for seed in seeds:
         data = thesis_protocol(n_drivers, duration=duration, seed=seed, cache=cache)
@@ -208,6 +220,11 @@ def run_searches(seeds, *, n_drivers, duration, n_jobs, cache, save=None):
         reports, walls = {}, {}
         for search in ("full", "fast"):
             label = f"{search} search seed {seed}"
+            if search == "full" and full_tables:
+                path = os.path.join(full_tables, f"full_search_seed_{seed}.joblib")
+                reports[search], walls[search] = load_tables(path)
+                print(f"{label}: tables of an earlier run ({walls[search]:.0f} s wall), {path}")
+                continue
             estimator = HMMGMRRegressor(random_state=0)
             reports[search], walls[search] = run_framework(
                 data, estimator, n_jobs, label, save, search=search
@@ -239,6 +256,94 @@ def run_searches(seeds, *, n_drivers, duration, n_jobs, cache, save=None):
     return results
 
 
+def exhaustive_stage(data, n_top, n_jobs, search):
+    """The exhaustive stage alone, as the framework runs it (K=2 on the Spearman filter's top
+    ``n_top`` features of the training recordings, validated on the validation ones): wall
+    seconds and ``(full fits, screened models)``."""
+    X, y, groups, split = split_recordings_table(data, None, None, TARGET)
+    train, searched = split == "train", np.isin(split, ["train", "validation"])
+    top = SpearmanSelector(k=n_top).fit(X[train], y[train], groups[train]).get_support()
+    X_s = X.loc[searched, X.columns[top]].reset_index(drop=True)
+    cv = PredefinedSplit(np.where(split[searched] == "validation", 0, -1))
+    selector = ExhaustiveFeatureSelector(
+        HMMGMRRegressor(n_states=2, random_state=0),
+        cv=cv,
+        sampling_period=sampling_period_of(data, None),
+        n_jobs=n_jobs,
+        search=search,
+    )
+    start = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        selector.fit(X_s, y[searched], groups=groups[searched])
+    return time.perf_counter() - start, _fits(selector.results_, ["subset"])
+
+
+def run_scale(*, n_drivers, duration, factor, n_tops, n_jobs, cache, seed=0, parts=None):
+    """How the time of both searches grows with the rows (the framework on ``n_drivers`` and
+    on ``factor`` times as many drivers) and with the candidate features (the exhaustive
+    stage on the top ``n`` of every ``n_tops``): a table with one row per run."""
+    parts = parts or ("rows", "features")
+    rows = []
+
+    def report(row):
+        rows.append(row)
+        print(
+            f"  {row['part']:<8} {row['drivers']:3d} drivers {row['rows']:>10,} rows "
+            f"{row['candidates']:3d} candidates  {row['search']:<4}  {row['seconds']:7.0f} s  "
+            f"EM fits {row['full_fits']} + {row['screened']} screened",
+            flush=True,
+        )
+
+    base = thesis_protocol(n_drivers, duration=duration, seed=seed, cache=cache)
+    for search in ("fast", "full"):  # compiled (numba's cache) and workers started, untimed
+        exhaustive_stage(base, 3, n_jobs, search)
+    if "features" in parts:
+        print(f"exhaustive stage alone, {n_drivers} drivers, {len(base):,} rows:")
+        for n_top in n_tops:
+            for search in ("fast", "full"):
+                seconds, (full, screened) = exhaustive_stage(base, n_top, n_jobs, search)
+                report(
+                    {
+                        "part": "features",
+                        "drivers": n_drivers,
+                        "rows": len(base),
+                        "candidates": n_top,
+                        "search": search,
+                        "seconds": seconds,
+                        "full_fits": full,
+                        "screened": screened,
+                    }
+                )
+    if "rows" in parts:
+        print("the framework (top 10, forward over all candidates, K = 1..20):")
+        for drivers in (n_drivers, factor * n_drivers):
+            data = base if drivers == n_drivers else None
+            if data is None:
+                data = thesis_protocol(drivers, duration=duration, seed=seed, cache=cache)
+            for search in ("fast", "full"):
+                label = f"{search} search, {drivers} drivers"
+                report_, wall = run_framework(
+                    data, HMMGMRRegressor(random_state=0), n_jobs, label, search=search
+                )
+                fits = em_fits(report_)
+                report(
+                    {
+                        "part": "rows",
+                        "drivers": drivers,
+                        "rows": len(data),
+                        "candidates": int(report_.filter.shape[0]),
+                        "search": search,
+                        "seconds": wall,
+                        "full_fits": sum(f for f, _ in fits.values()),
+                        "screened": sum(s for _, s in fits.values()),
+                    }
+                )
+    table = pd.DataFrame(rows)
+    print(table.to_string(index=False))
+    return table
+
+
 def load_tables(path):
     """The tables of a run saved with ``--save`` (e.g. ``reference_path.joblib``), as a
     report-like namespace, and that run's wall time."""
@@ -246,6 +351,13 @@ def load_tables(path):
     wall = tables.pop("wall_s", None)
     if wall is None:
         wall = sum(tables["timings"].values())
+    if "sources" in tables:  # the report's properties, from the fitted sources
+        source = {}
+        for name, selector in tables["sources"].items():
+            source.update(source_tables(name, selector))
+        tables.setdefault("source_tables", source)
+        tables.setdefault("exhaustive", source.get("exhaustive_results"))
+        tables.setdefault("forward_paths", source.get("forward_paths"))
     return types.SimpleNamespace(**tables), wall
 
 
@@ -447,6 +559,28 @@ def main(argv=None):
         help='only search="full" against search="fast", side by side per seed',
     )
     parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="with --searches")
+    parser.add_argument(
+        "--scale",
+        action="store_true",
+        help="only both searches as the rows and the candidate features grow",
+    )
+    parser.add_argument("--scale-factor", type=int, default=4, help="with --scale: x drivers")
+    parser.add_argument("--n-tops", type=int, nargs="+", default=[10, 12, 14], help="with --scale")
+    parser.add_argument(
+        "--scale-parts", nargs="+", choices=["rows", "features"], default=None, help="with --scale"
+    )
+    parser.add_argument(
+        "--full-tables",
+        default=None,
+        help="with --searches: read the full search of an earlier --save folder, not run it",
+    )
+    parser.add_argument(
+        "--near-tie",
+        type=float,
+        default=None,
+        help="the fast search fits in full the near-ties within this share (e.g. 0.005) of "
+        "what the wrappers' decisions read (default: off)",
+    )
     parser.add_argument("--skip-reference", action="store_true")
     parser.add_argument("--skip-peer", action="store_true")
     parser.add_argument("--save", default=None, help="directory for the selection tables")
@@ -456,6 +590,18 @@ def main(argv=None):
         help="compare with the saved tables of an earlier reference run instead of running it",
     )
     args = parser.parse_args(argv)
+    _screening.NEAR_TIE = args.near_tie
+    if args.scale:
+        return run_scale(
+            n_drivers=args.drivers,
+            duration=args.duration,
+            factor=args.scale_factor,
+            n_tops=args.n_tops,
+            n_jobs=args.n_jobs,
+            cache=args.cache,
+            seed=args.seeds[0],
+            parts=args.scale_parts,
+        )
     if args.searches:
         return run_searches(
             args.seeds,
@@ -464,6 +610,7 @@ def main(argv=None):
             n_jobs=args.n_jobs,
             cache=args.cache,
             save=args.save,
+            full_tables=args.full_tables,
         )
     return run(
         args.drivers,

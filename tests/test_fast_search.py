@@ -14,8 +14,8 @@ from skhmmgmr import HMMGMRRegressor, StateSelector
 from skhmmgmr.feature_selection import ExhaustiveFeatureSelector, ForwardFeatureSelector
 from skhmmgmr.metrics import evaluate_recordings
 from skhmmgmr.selection import select_parameters
-from skhmmgmr.selection._search import base
-from skhmmgmr.selection._search._score_tables import rescore_table
+from skhmmgmr.selection._search import _screening, base
+from skhmmgmr.selection._search._score_tables import best_per_recording, rescore_table
 from skhmmgmr.selection._selectors._states import read_by_the_rule, state_choices
 
 FEATURES = ["f0", "f1", "f2", "f3"]
@@ -114,7 +114,7 @@ def test_the_rule_reads_a_prefix_that_settles_its_choice():
             assert state_choices(changed)["n_states"].iloc[0] == choice
 
 
-def test_the_fast_exhaustive_search_keeps_the_relevant_features(searched):
+def test_the_fast_exhaustive_search_keeps_the_relevant_features(searched, monkeypatch):
     # The torque depends on f0 and f1. Both searches keep them; on these short recordings
     # a K=2 model has several optima, and the fast search's subset may hold one more feature
     # than the full search's (its screened models sit in the joint model's optimum).
@@ -130,9 +130,23 @@ def test_the_fast_exhaustive_search_keeps_the_relevant_features(searched):
     assert not joint["screened"].any()
     np.testing.assert_array_equal(joint["accuracy"], joint["accuracy_f"])
     assert merged.loc[merged["n_features"] < len(FEATURES), "screened"].all()
+    # with near-ties confirmed, every recording's best subset at every trade-off of the grid,
+    # and its near-ties, are fitted as the full search fits them, to the bit
+    monkeypatch.setattr(_screening, "NEAR_TIE", 0.005)
+    fast = ExhaustiveFeatureSelector(search="fast", **kwargs).fit(X, y, groups=groups)
+    merged = fast.results_.merge(full.results_, on=["subset", "recording"], suffixes=("", "_f"))
+    grid = [f"{a}/{100 - a}" for a in range(0, 101, 10)]
+    winners = best_per_recording(
+        rescore_table(fast.results_, "subset", grid), "subset", tie_breaker="n_features"
+    )
+    exact = merged[~merged["screened"]]
+    assert set(winners["subset"]) <= set(exact["subset"])
+    np.testing.assert_array_equal(exact["accuracy"], exact["accuracy_f"])
+    np.testing.assert_array_equal(exact["smoothness"], exact["smoothness_f"])
+    assert merged["screened"].any()
 
 
-def test_the_fast_forward_search_starts_from_the_full_search_first_step(searched):
+def test_the_fast_forward_search_starts_from_the_full_search_first_step(searched, monkeypatch):
     X, y, groups, cv = searched
     kwargs = dict(cv=cv, sampling_period=PERIOD, trade_offs=["100/0"])
     full = ForwardFeatureSelector(search="full", **kwargs).fit(X, y, groups=groups)
@@ -141,6 +155,20 @@ def test_the_fast_forward_search_starts_from_the_full_search_first_step(searched
     # both paths take the same feature first
     first = [p[p["accepted"]]["feature"].iloc[0] for p in (full.paths_, fast.paths_)]
     assert first[0] == first[1]
+    assert fast.results_.loc[fast.results_["n_features"] < len(FEATURES), "screened"].all()
+    monkeypatch.setattr(_screening, "NEAR_TIE", 0.005)
+    fast = ForwardFeatureSelector(search="fast", **kwargs).fit(X, y, groups=groups)
+    # every step's best option (accepted or not) and the single features (the scales) are
+    # fitted as the full search fits them, to the bit, and read once in the table
+    results = fast.results_
+    assert not results.duplicated(["subset", "recording"]).any()
+    exact = results[~results["screened"]]
+    read = set(fast.paths_["subset"]) | {(f,) for f in FEATURES}
+    assert read <= set(exact["subset"])
+    merged = exact.merge(full.results_, on=["subset", "recording"], suffixes=("", "_f"))
+    assert len(merged) == len(exact)
+    np.testing.assert_array_equal(merged["accuracy"], merged["accuracy_f"])
+    np.testing.assert_array_equal(merged["smoothness"], merged["smoothness_f"])
 
 
 def test_an_estimator_the_fast_search_does_not_serve_is_searched_in_full(searched):

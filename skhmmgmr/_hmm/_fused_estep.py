@@ -41,6 +41,22 @@ from ._kernels import RESCALE_BELOW, UNDERFLOW, normalise_row
 _FASTMATH = {"reassoc", "contract"}
 
 
+@njit(inline="always", cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy")
+def state_log_densities(projection, norms, n_dims, log_density):
+    """Fill ``log_density[k]`` of every state ``k`` from a row's projections on the stacked
+    factors (``norms[k]`` minus the squared norm of state ``k``'s ``n_dims`` projections);
+    return the largest. Inlined where it is called: one row's step of the fused pass and of
+    :func:`~skhmmgmr._hmm._gmr_scores.error_sums`."""
+    top = -np.inf
+    for k in range(norms.shape[0]):
+        half = 0.0
+        for m in range(k * n_dims, (k + 1) * n_dims):
+            half += projection[m] * projection[m]
+        log_density[k] = norms[k] - half
+        top = max(top, log_density[k])
+    return top
+
+
 @njit(cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy")
 def _forward(values, lo, hi, stacked, norms, startprob, transmat, frames, alpha, scale):
     """Forward pass over rows ``lo:hi`` of ``values`` into rows ``0:hi-lo`` of the buffers.
@@ -60,13 +76,7 @@ def _forward(values, lo, hi, stacked, norms, startprob, transmat, frames, alpha,
             value = values[a, lo + t]
             for m in range(projection.shape[0]):
                 projection[m] += value * stacked[a, m]
-        top = -np.inf
-        for k in range(n_states):
-            half = 0.0
-            for m in range(k * n_dims, (k + 1) * n_dims):
-                half += projection[m] * projection[m]
-            log_density[k] = norms[k] - half
-            top = max(top, log_density[k])
+        top = state_log_densities(projection, norms, n_dims, log_density)
         log_likelihood += top
         total = 0.0
         for j in range(n_states):

@@ -19,6 +19,8 @@ Complete data, one output, no read-out; the estimate is that of ``predict`` to r
 import numpy as np
 from numba import njit
 
+from ._fused_estep import state_log_densities
+
 
 @njit(cache=True, nogil=True, fastmath={"reassoc", "contract"}, error_model="numpy")
 def _error_sums(
@@ -43,13 +45,7 @@ def _error_sums(
                 x[a] = X[t, columns[a]]
                 for m in range(projection.shape[0]):
                     projection[m] += x[a] * factors[a, m]
-            top = -np.inf
-            for k in range(n_states):
-                half = 0.0
-                for m in range(k * n_dims, (k + 1) * n_dims):
-                    half += projection[m] * projection[m]
-                log_density[k] = norms[k] - half
-                top = max(top, log_density[k])
+            top = state_log_densities(projection, norms, n_dims, log_density)
             total = 0.0
             for j in range(n_states):
                 frames[j] = np.exp(log_density[j] - top)

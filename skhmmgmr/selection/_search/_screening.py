@@ -47,7 +47,6 @@ from ..._hmm._gmr_scores import error_sums
 from ...estimator import HMMGMRRegressor
 from ._evaluation import (
     code_version,
-    evaluate_models,
     fitted_and_scored,
     fold_arrays,
     shared_with_workers,
@@ -61,6 +60,14 @@ SEARCHES = ("fast", "full")
 SUBSET_ITERATIONS = 2
 #: EM iterations after every split of the state sweep's chain.
 STATE_ITERATIONS = 3
+#: When set (a share, e.g. 0.005), the wrappers fit in full every screened subset whose
+#: performance score is within this share of what a decision reads (a recording's best in the
+#: exhaustive wrapper, a path's best option in the forward one): the decisions are then read
+#: from full fits wherever the screening's error is below it. Off (``None``): at the thesis'
+#: scale it gave seed 0 the full search's answers at 0.005 but fitted a third of the subsets
+#: in full, and the fast search was no longer faster (``benchmarks/bench_framework.py
+#: --near-tie``, the selection page of the user guide).
+NEAR_TIE = None
 #: Screened models per task: the per-task cost (reading the fold, a worker's start) is
 #: spread over them, and the last tasks stay short.
 BATCH_SIZE = 8
@@ -264,15 +271,31 @@ class FastSearch:
         As the full search takes them (:func:`~._evaluation.evaluate_models`).
     sampling_period, n_jobs, memory, verbose
         As the full search takes them.
+    evaluate_in_full : callable
+        ``evaluate_in_full(models, desc, with_bic=...)``: the table of ``models`` on this
+        data fitted as the full search fits them (the selector's
+        :func:`~._evaluation.evaluate_models`).
     """
 
     def __init__(
-        self, estimator, X, y, groups, splits, *, sampling_period, n_jobs, memory, verbose
+        self,
+        estimator,
+        X,
+        y,
+        groups,
+        splits,
+        *,
+        sampling_period,
+        n_jobs,
+        memory,
+        verbose,
+        evaluate_in_full,
     ):
         self.estimator = clone(estimator)
         self.X, self.y, self.groups, self.splits = X, y, groups, splits
         self.sampling_period = sampling_period
         self.n_jobs, self.memory, self.verbose = n_jobs, check_memory(memory), verbose
+        self.evaluate_in_full = evaluate_in_full
         self._stack = ExitStack()
         self._joints = {}
         self._arrays = None
@@ -353,20 +376,7 @@ class FastSearch:
         return table
 
     def _full(self, models, desc, with_bic, ids=None):
-        table = evaluate_models(
-            self.estimator,
-            self.X,
-            self.y,
-            self.groups,
-            self.splits,
-            models,
-            sampling_period=self.sampling_period,
-            with_bic=with_bic,
-            n_jobs=self.n_jobs,
-            memory=self.memory,
-            verbose=self.verbose,
-            desc=desc,
-        )
+        table = self.evaluate_in_full(models, desc, with_bic=with_bic)
         if ids is not None:
             table["model"] = [ids[i] for i in table["model"]]
         return table

@@ -11,6 +11,7 @@ selector's ``fit`` inputs.
 
 import numbers
 from contextlib import contextmanager
+from functools import partial
 
 import joblib
 import numpy as np
@@ -171,6 +172,7 @@ class RecordingSearchMixin:
             n_jobs=self.n_jobs,
             memory=self.memory,
             verbose=self.verbose,
+            evaluate_in_full=partial(self._evaluate_in_full, X, y, groups, splits),
         ) as search:
             self._fast_search = search
             try:
@@ -190,6 +192,11 @@ class RecordingSearchMixin:
         search = getattr(self, "_fast_search", None)
         if search is not None:
             return search.evaluate(models, desc, with_bic=with_bic, settle=settle)
+        return self._evaluate_in_full(X, y, groups, splits, models, desc, with_bic=with_bic)
+
+    def _evaluate_in_full(self, X, y, groups, splits, models, desc, *, with_bic=False):
+        """Every model fitted as the full search fits it (:func:`~._evaluation.evaluate_models`,
+        the selector's settings); the fast search's door to its exact fits too."""
         return evaluate_models(
             self._search_estimator(),
             X,
@@ -205,12 +212,21 @@ class RecordingSearchMixin:
             desc=desc,
         )
 
-    def _evaluate_subsets(self, X, y, groups, splits, subsets, desc):
+    def _evaluate_subsets(self, X, y, groups, splits, subsets, desc, settle=None, in_full=False):
         """The table of every feature subset (column indices) on every validation recording;
         in a :func:`~._evaluation.shared_evaluations` block, the subsets another search step
-        evaluated are read, not refitted."""
+        evaluated are read, not refitted. ``settle``: as :meth:`_evaluate_models` takes it,
+        on the table of the subsets evaluated here (``model`` indexes ``subsets``).
+        ``in_full``: every subset fitted as the full search fits it, none read or screened."""
         names = self._names()
         subset_names = [tuple(names[list(s)]) for s in subsets]
+        if in_full:  # the fast search's confirmation of screened subsets
+            table = self._evaluate_in_full(
+                X, y, groups, splits, [(s, {}) for s in subsets], desc
+            ).assign(screened=False)
+            table.insert(1, "subset", [subset_names[i] for i in table["model"]])
+            table.insert(2, "n_features", [len(subsets[i]) for i in table["model"]])
+            return table.drop(columns="model")
         shared = shared_evaluation_store()
         context = known = None
         if shared is not None and hasattr(self, "feature_names_in_"):
@@ -224,7 +240,16 @@ class RecordingSearchMixin:
                 if (context, key) in shared
             }
         todo = [i for i in range(len(subsets)) if not known or i not in known]
-        table = self._evaluate_models(X, y, groups, splits, [(subsets[i], {}) for i in todo], desc)
+        settle_todo = None
+        if settle is not None:
+            position = {i: p for p, i in enumerate(todo)}
+
+            def settle_todo(table):
+                read = settle(table.assign(model=[todo[m] for m in table["model"]]))
+                return [position[i] for i in read if i in position]
+
+        models = [(subsets[i], {}) for i in todo]
+        table = self._evaluate_models(X, y, groups, splits, models, desc, settle=settle_todo)
         if known is not None:
             table = self._merge_shared(table, todo, known, shared, context, subset_names)
         table.insert(1, "subset", [subset_names[i] for i in table["model"]])

@@ -17,7 +17,15 @@ from sklearn.utils.validation import check_is_fitted
 
 from ..._core._compat import Interval, _fit_context
 from ..._core._docstrings import fill_shared_parameters
-from .._search._score_tables import best_on_average, best_per_recording, rescore_table
+from ...metrics._scores import trade_offs as all_trade_offs
+from .._search import _screening
+from .._search._score_tables import (
+    best_on_average,
+    best_per_recording,
+    labels_of,
+    near_best,
+    rescore_table,
+)
 from .._search.base import RecordingSelector
 
 
@@ -132,8 +140,26 @@ class ExhaustiveFeatureSelector(RecordingSelector):
             for size in range(self.min_features, largest + 1)
             for subset in itertools.combinations(range(n_features), size)
         ]
+        trade_offs = [*all_trade_offs(10), *labels_of(self._trade_off)]
+
+        near_tie = _screening.NEAR_TIE
+
+        def settle(table):
+            # the fast search fits in full every recording's best subset and its near-ties, at
+            # every trade-off of a 10 % grid: the per-recording winners relevance counts
+            scores = rescore_table(table, "model", trade_offs)
+            return near_best(scores, "model", near_tie)
+
         with self._searching(X, y, groups, splits):
-            self.results_ = self._evaluate_subsets(X, y, groups, splits, subsets, "feature subsets")
+            self.results_ = self._evaluate_subsets(
+                X,
+                y,
+                groups,
+                splits,
+                subsets,
+                "feature subsets",
+                settle=None if near_tie is None else settle,
+            )
         best = self.best_subsets(self._trade_off, per_recording=False)
         self.subset_ = best["subset"].iloc[0]
         self.support_ = np.isin(self._names(), self.subset_)

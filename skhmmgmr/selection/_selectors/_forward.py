@@ -14,6 +14,7 @@ from sklearn.utils.validation import check_is_fitted
 from ..._core._compat import Interval, StrOptions, _fit_context
 from ..._core._docstrings import fill_shared_parameters
 from ...metrics._table import parse_trade_offs
+from .._search import _screening
 from .._search._score_tables import labels_of
 from .._search.base import RecordingSelector
 from ._forward_paths import ForwardPath, FrozenScores, paths_table
@@ -140,17 +141,45 @@ class ForwardFeatureSelector(RecordingSelector):
         weights = {label: (w1, w2) for label, w1, w2 in [own, *extra]}
 
         recordings = pd.unique(np.concatenate([groups[val] for _, val in splits]))
-        scores, tables = FrozenScores(recordings), []
+        scores, tables, exact = FrozenScores(recordings), [], set()
 
-        def evaluate(subsets):
-            missing = scores.missing(subsets)
+        def evaluate(subsets, in_full=False):
+            missing = scores.missing(subsets) if not in_full else subsets
             if missing:
-                tables.append(self._evaluate_subsets(X, y, groups, splits, missing, "forward step"))
-                scores.add(missing, tables[-1])
+                table = self._evaluate_subsets(
+                    X, y, groups, splits, missing, "forward step", in_full=in_full
+                )
+                tables.append(table)
+                scores.add(missing, table)
+                if "screened" not in table:
+                    exact.update(missing)
+                else:
+                    by_subset = table.groupby("subset", sort=False)["screened"].any()
+                    pairs = zip(missing, by_subset, strict=True)
+                    exact.update(s for s, screened in pairs if not screened)
+
+        def confirm(active):
+            # the fast search fits in full every path's best option and its near-ties, until
+            # the decisions read no screened score (near_tie: the screening's error)
+            while True:
+                needed = set()
+                for path, score_of in active:
+                    options = path.candidates()
+                    values = [score_of(s) for s in options]
+                    bound = min(values) * (1.0 + near_tie)
+                    needed.update(s for s, v in zip(options, values, strict=True) if v <= bound)
+                todo = sorted(needed - exact)
+                if not todo:
+                    return
+                evaluate(todo, in_full=True)
 
         with self._searching(X, y, groups, splits):
+            near_tie = _screening.NEAR_TIE
+            fast = getattr(self, "_fast_search", None) is not None and near_tie is not None
             singles = [(j,) for j in range(n_features)]
             evaluate(singles)
+            if fast:  # the scales every score is divided by, from full fits
+                evaluate([s for s in singles if s not in exact], in_full=True)
             scores.freeze(singles)
 
             path_ids = ["average"] if self.mode == "average" else list(range(len(recordings)))
@@ -163,6 +192,8 @@ class ForwardFeatureSelector(RecordingSelector):
             while any(path.active for path, _ in paths.values()):
                 active = [(path, fn) for path, fn in paths.values() if path.active]
                 evaluate([s for path, _ in active for s in path.candidates()])
+                if fast:
+                    confirm(active)
                 for path, score_of in active:
                     path.step(score_of)
 
@@ -170,7 +201,11 @@ class ForwardFeatureSelector(RecordingSelector):
         self.paths_ = paths_table(
             {key: path for key, (path, _) in paths.items()}, names, recordings
         )
-        self.results_ = pd.concat(tables, ignore_index=True)
+        results = pd.concat(tables, ignore_index=True)
+        if "screened" in results:  # a subset fitted in full replaces its screened rows
+            confirmed = results.loc[~results["screened"], "subset"]
+            results = results[~(results["screened"] & results["subset"].isin(set(confirmed)))]
+        self.results_ = results.reset_index(drop=True)
         self.subset_ = self._chosen_subset(own[0])
         self.support_ = np.isin(names, self.subset_)
         return self

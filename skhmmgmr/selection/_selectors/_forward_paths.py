@@ -67,6 +67,7 @@ class FrozenScores:
         return [s for s in dict.fromkeys(subsets) if s not in self.terms]
 
     def add(self, subsets, table):
+        """The terms of ``subsets`` from their ``table`` (known terms are replaced)."""
         parts = table.groupby("subset", sort=False)
         for subset, (_, part) in zip(subsets, parts, strict=True):
             part = part.set_index("recording").loc[self.recordings]
