@@ -111,6 +111,9 @@ def describe(features, readout, period):
     radii = features.friction_angle_
     if radii:
         friction += ", plays " + ", ".join(f"{r * 1000:.3g}" for r in radii) + " mrad"
+        lead = getattr(features, "angle_lead_", None)
+        if lead is not None:
+            friction += f" led {lead * 1000:g} ms"
     tau = features.velocity_filter_
     velocity = "no filter" if tau is None else f"filter {tau * 1000:g} ms"
     return f"{friction}, {velocity}, read-out {readout * period * 1000:.1f} ms"

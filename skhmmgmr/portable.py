@@ -94,8 +94,10 @@ steps in order, each an object with ``name`` (the step's name in the pipeline) a
   ``w_j`` to three significant digits), then (with ``friction_angle``, an array of
   half-widths ``r_j``: a key written only with them, with ``angle_column`` the angle's
   column) one input ``steering_hysteresis_<r_j> = (a - p_j) / r_j`` per half-width, ``a`` the
-  angle and ``p_j`` its play ``p_t = min(max(p_(t-1), a_t - r_j), a_t + r_j)``, restarted at
-  every recording at its first observed angle (a missing angle leaves it alone), and for
+  angle (with ``angle_lead`` ``l``, a key written only with a lead, ``a`` is the angle plus
+  ``l`` times the column ``friction_column``, unfiltered) and ``p_j`` its play
+  ``p_t = min(max(p_(t-1), a_t - r_j), a_t + r_j)``, restarted at every recording at its
+  first observed angle (a missing angle leaves it alone), and for
   every column ``x`` of ``load_columns``
   and every ``p`` of ``powers`` ``sign(x) |x|^p`` (named ``<x>_signed_square``, ``<x>_cube``,
   ``<x>_signed_power<p>``; columns are names, or positions when ``feature_names_in`` is

@@ -150,10 +150,12 @@ def test_pipeline_equals_the_regressor_on_the_derived_columns(recordings):
     pipeline.fit(X, y, groups=groups)
     # the pipeline's regressor reads out the estimate by the "auto" rule (its default)
     by_hand = HMMGMRRegressor(n_states=2, random_state=0, n_iter=20, output_smoothing="auto")
-    # the friction and hysteresis inputs the pipeline chose ("auto"), by hand
+    # the friction and hysteresis inputs and the plays' lead the pipeline chose ("auto"), by
+    # hand
     chosen = SteeringFeatures(
         friction_velocity=pipeline[0].friction_velocity_,
         friction_angle=pipeline[0].friction_angle_,
+        angle_lead=pipeline[0].angle_lead_,
     )
     derived = chosen.fit_transform(X, groups=groups)
     by_hand.fit(derived, y, groups=groups)

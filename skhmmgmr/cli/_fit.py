@@ -69,6 +69,9 @@ TORQUE_OPTIONS = {
     "input of a column whose friction sticks ('auto': none or several chosen on the training "
     "recordings; 'none': no hysteresis input)",
     "angle_column": "column of the steering-wheel angle, the input of the plays",
+    "angle_lead": "time [s] by which the plays read the angle ahead on the velocity, angle + "
+    "lead * velocity ('auto': none, 0.02 or 0.05 s chosen on the training recordings; 'none': "
+    "the angle itself)",
     "load_columns": "columns whose signed powers are appended (the option alone: none)",
     "powers": "powers >= 2 appended for every load column",
     "velocity_filter": "time constant [s] of a causal low-pass filter on the velocity before "
@@ -167,7 +170,9 @@ def command_fit(args):
             )
         radii = model[0].friction_angle_
         if radii is not None:
-            derived += f" (friction_angle {', '.join(f'{r:g}' for r in radii)})"
+            derived += f" (friction_angle {', '.join(f'{r:g}' for r in radii)}"
+            lead = model[0].angle_lead_
+            derived += ")" if lead is None else f", angle_lead {lead:g})"
         derived += f"; read-out time constant {model[-1].output_smoothing_:g} rows"
     log(
         args,
@@ -196,6 +201,7 @@ def _add_torque_options(parser):
         "friction_column": {},
         "friction_angle": dict(type=checked_by(setting, SteeringFeatures, "friction_angle")),
         "angle_column": {},
+        "angle_lead": dict(type=checked_by(setting, SteeringFeatures, "angle_lead")),
         "load_columns": dict(nargs="*"),
         "powers": dict(nargs="*", type=int),
         "velocity_filter": dict(type=checked_by(setting, SteeringFeatures, "velocity_filter")),

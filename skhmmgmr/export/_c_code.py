@@ -6,7 +6,8 @@ Every number and every operation is of the filter's arithmetic (``double``, or `
 value is promoted to ``double`` on the way); the friction inputs are ``tanh(v /
 friction_velocity)`` for one band, ``tanh(v / friction_widths[j])`` for every width of a
 basis, the velocity (filtered or not) read once; the hysteresis inputs are ``(a - p_j) /
-friction_radii[j]`` of the plays on the angle (their positions in the state); a signed power
+friction_radii[j]`` of the plays on the angle ``a`` (their positions in the state; with a
+lead, ``a`` is the angle plus ``angle_lead`` times the unfiltered velocity); a signed power
 ``sign(x) |x|^p`` is a chain of multiplications in single precision up to
 :data:`CHAINED_POWERS`, ``pow``/``powf`` beyond (and for ``p > 2`` in double precision, as
 :class:`~skhmmgmr.SteeringFeatures` computes it).
@@ -62,6 +63,8 @@ def _named_parameters(spec):
     if derived.hysteresis is not None:
         radii = np.asarray(derived.hysteresis[1])
         parts.append(("friction_radii", radii, "half-widths of the plays (hysteresis inputs)"))
+    if derived.angle_lead is not None:
+        constants.append(("angle_lead", derived.angle_lead[1]))
     if derived.velocity_decay is not None:
         constants.append(("velocity_decay", derived.velocity_decay))
         constants.append(("velocity_gain", 1.0 - derived.velocity_decay))
@@ -119,7 +122,10 @@ def derived_code(spec, dtype):
             lines.append("    }")
         column += len(widths)
     if derived.hysteresis is not None:
-        lines.append(f"    play(state, inputs[{derived.hysteresis[0]}], x + {column});")
+        angle = f"inputs[{derived.hysteresis[0]}]"
+        if derived.angle_lead is not None:
+            angle += f" + angle_lead * inputs[{derived.angle_lead[0]}]"
+        lines.append(f"    play(state, {angle}, x + {column});")
         column += len(derived.hysteresis[1])
     for position, power in derived.powers:
         magnitude = _power(f"inputs[{position}]", power, dtype)

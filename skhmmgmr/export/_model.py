@@ -45,13 +45,15 @@ class DerivedInputs:
     widths (one: a band, several: a basis); ``powers``: ``(position, power)`` of every signed
     power in the transformer's column order; ``velocity_decay``: the decay of the velocity's
     low-pass filter per sample, or None; ``hysteresis``: ``(position, radii)`` of the angle
-    and the plays' half-widths, or None.
+    and the plays' half-widths, or None; ``angle_lead``: ``(position, lead)`` of the velocity
+    and the time the plays read the angle ahead on it, or None (the angle itself).
     """
 
     friction: tuple = None
     powers: tuple = ()
     velocity_decay: float = None
     hysteresis: tuple = None
+    angle_lead: tuple = None
 
     @property
     def n_derived(self):
@@ -171,6 +173,9 @@ def _derived_inputs(features, regressor):
         sources.append(features.friction_column)
     if features.friction_angle_ is not None:
         sources.append(features.angle_column)
+    lead = getattr(features, "angle_lead_", None)
+    if lead is not None:
+        sources.append(features.friction_column)
     # fit checked that every source column exists
     positions = {
         column: (raw_names.index(column) if isinstance(column, str) else int(column))
@@ -191,7 +196,9 @@ def _derived_inputs(features, regressor):
     hysteresis = None
     if features.friction_angle_ is not None:
         hysteresis = (positions[features.angle_column], tuple(features.friction_angle_))
-    derived = DerivedInputs(friction, powers, decay, hysteresis)
+    if lead is not None:
+        lead = (positions[features.friction_column], float(lead))
+    derived = DerivedInputs(friction, powers, decay, hysteresis, lead)
     expected = list(features.get_feature_names_out())
     given = getattr(regressor, "feature_names_in_", None)
     if n_raw + derived.n_derived != regressor.n_features_in_ or (

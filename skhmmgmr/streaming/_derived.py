@@ -12,7 +12,9 @@ imports it: a step is read through the plain description it returns, a dict of
 ``filter_decay`` (float or None: no velocity filter), ``sampling_period`` (float or
 None), ``angle_position`` (int or None: no hysteresis input), ``friction_angle`` (list of
 floats: the plays' half-widths), ``load_positions`` (list of int) and ``powers`` (list of
-int).
+int); optionally ``angle_lead`` (float or None) and ``lead_position`` (int or None): the plays
+read ``angle + angle_lead * velocity``, the velocity at ``lead_position`` (a description
+without them has no lead).
 
 Every step appends its derived inputs to its input row, so the row the regressor reads is the
 sensed row followed by every step's derived inputs. An update reads the sensed row as a Python
@@ -78,6 +80,8 @@ class DerivedInputs:
         self.sampling_period = settings["sampling_period"]
         self.angle = settings["angle_position"]
         self.radii = tuple(float(r) for r in settings["friction_angle"] or ())
+        self.lead = settings.get("angle_lead")
+        self.lead_position = settings.get("lead_position")
         self.loads = tuple(int(p) for p in settings["load_positions"])
         self.powers = tuple(int(p) for p in settings["powers"])
         if self.decay is not None:
@@ -104,7 +108,10 @@ class DerivedInputs:
             for width in self.widths:
                 values.append(math.tanh(velocity / width))
         if self.angle is not None:
-            values.extend(self.hysteresis(values[self.angle]))
+            angle = values[self.angle]
+            if self.lead is not None:
+                angle = angle + self.lead * values[self.lead_position]
+            values.extend(self.hysteresis(angle))
         powers = self.powers
         for position in self.loads:
             x = values[position]

@@ -8,6 +8,7 @@ experiment so that it also drives (:class:`DriverModel`, :func:`make_driver_mode
 from ._derived_inputs import low_pass as low_pass
 from ._driver_model import DEFAULT_PERTURBATION_PENALTY as DEFAULT_PERTURBATION_PENALTY
 from ._driver_model import DriverModel, make_driver_model
+from ._friction_search import ANGLE_LEADS as ANGLE_LEADS
 from ._friction_search import FILTER_CANDIDATES as FILTER_CANDIDATES
 from ._friction_search import WIDTH_GRID as WIDTH_GRID
 from ._pipeline import TorquePipeline, make_torque_pipeline

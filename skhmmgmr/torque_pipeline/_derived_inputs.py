@@ -137,6 +137,12 @@ def hysteresis_input(angle, radius):
     return out
 
 
+def led_angle(angle, velocity, lead):
+    """The angle the plays read with ``angle_lead``: ``angle + lead * velocity`` (see
+    ``SteeringFeatures``)."""
+    return angle + lead * velocity
+
+
 def recording_hysteresis(angle, layout, radii):
     """The hysteresis inputs of rows in filter order (their recordings' ``layout``), the play
     restarted at every recording, by name."""
@@ -248,3 +254,51 @@ def check_widths(widths, parameter, names_of):
             f"{parameter}={widths!r} repeats a width (to three significant digits, which "
             f"name the inputs: {names})."
         )
+
+
+def fitted_friction(friction):
+    """A ``friction_velocity`` as the fitted step holds it: a basis as a tuple of floats."""
+    if isinstance(friction, tuple | list):
+        return friction_widths(friction)
+    return friction
+
+
+def fitted_radii(radii):
+    """A ``friction_angle`` as the fitted step holds it: a tuple of floats (or None, "auto")."""
+    if isinstance(radii, tuple | list):
+        return tuple(float(r) for r in radii)
+    if radii is None or isinstance(radii, str):
+        return radii
+    return (float(radii),)
+
+
+def fitted_lead(lead, radii):
+    """An ``angle_lead`` as the fitted step holds it: a float, ``"auto"``, or ``None`` for the
+    angle itself (a lead of 0, or no plays)."""
+    if lead is None or radii is None or (not isinstance(lead, str) and lead == 0):
+        return None
+    return lead if isinstance(lead, str) else float(lead)
+
+
+def check_settings(step):
+    """What the constraints of a ``SteeringFeatures``' parameters cannot say: the powers,
+    the load columns, the widths and finite numbers."""
+    for power in step.powers:
+        if not isinstance(power, numbers.Integral) or isinstance(power, bool) or power < 2:
+            raise ValueError(
+                f"powers must hold integers >= 2 (1 is the input itself); got {power!r} "
+                f"in powers={step.powers!r}."
+            )
+    if len(set(step.powers)) != len(step.powers):
+        raise ValueError(f"powers={step.powers!r} repeats a power.")
+    if len(set(step.load_columns)) != len(step.load_columns):
+        raise ValueError(f"load_columns={step.load_columns!r} repeats a column.")
+    if isinstance(step.friction_velocity, tuple | list):
+        check_widths(step.friction_velocity, "friction_velocity", friction_names)
+    if isinstance(step.friction_angle, tuple | list):
+        check_widths(step.friction_angle, "friction_angle", hysteresis_names)
+    for name in ("friction_velocity", "velocity_filter", "sampling_period", "angle_lead"):
+        value = getattr(step, name)
+        real = isinstance(value, numbers.Real) and not isinstance(value, bool)
+        if real and not math.isfinite(value):
+            raise ValueError(f"{name} must be finite; got {name}={value!r}.")

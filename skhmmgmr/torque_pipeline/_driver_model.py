@@ -267,6 +267,7 @@ def make_driver_model(
         output_smoothing=output_smoothing,
         # no plays on the angle: the driver model was measured at the wheel without them
         friction_angle=None,
+        angle_lead=None,
         random_state=random_state,
         **params,
     )

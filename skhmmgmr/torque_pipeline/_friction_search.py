@@ -24,7 +24,10 @@ recordings:
 - **the candidates**: no friction input, and every window of consecutive widths of the ladder
   (a basis ``tanh(v / w_j)``, whose combination each state's regression fits: one width is
   one band), each with no hysteresis input or every window of consecutive half-widths of its
-  ladder, with each velocity filter of :data:`FILTER_CANDIDATES`;
+  ladder, with each velocity filter of :data:`FILTER_CANDIDATES`, the plays reading the
+  angle or, with ``angle_lead="auto"``, the angle led on the velocity by each lead of
+  :data:`ANGLE_LEADS` (an angle sensor's steps may be coarser than the plays: the velocity
+  places the angle between them);
 - **the score**: the held-out error of a least-squares fit of the target on the inputs, the
   load inputs and the candidate's friction and hysteresis inputs, the recordings split in
   :data:`SEARCH_FOLDS` folds;
@@ -47,6 +50,7 @@ from ._derived_inputs import (
     filtered_velocity,
     friction_inputs,
     friction_widths,
+    led_angle,
     load_inputs,
     recording_hysteresis,
 )
@@ -67,6 +71,8 @@ RADIUS_GRID = tuple(0.001 * 2.0**k for k in range(-4, 7))
 ANGLE_QUANTILES = (0.05, 0.25)
 #: The velocity filters [s] ``velocity_filter="auto"`` compares (``None``: no filter).
 FILTER_CANDIDATES = (None, 0.02, 0.05)
+#: The leads [s] ``angle_lead="auto"`` compares (``None``: the plays read the angle itself).
+ANGLE_LEADS = (None, 0.02, 0.05)
 #: Folds of the inner validation of the "auto" choices.
 SEARCH_FOLDS = 3
 #: The relative held-out error within which fewer friction and hysteresis inputs are
@@ -82,6 +88,12 @@ def search_filters(velocity_filter, sampling_period):
     if sampling_period is None:
         return (None,)
     return FILTER_CANDIDATES
+
+
+def search_leads(angle_lead):
+    """The angle leads the inner validation compares: every one of ``"auto"``, the setting
+    itself otherwise (``None`` without plays)."""
+    return ANGLE_LEADS if angle_lead == AUTO else (angle_lead,)
 
 
 def velocity_ladder(velocity):
@@ -139,9 +151,10 @@ def friction_search(base, target, recordings, searched, settings):
     recordings : Recordings
         The recordings of the rows, for the folds.
     searched : list of (float or None, list of ndarray, list of (dict, tuple of int))
-        Per velocity filter: its time constant, the friction and hysteresis columns it gives
-        (one per width) and its candidates, each the settings it stands for
-        (``friction_velocity``, ``friction_angle``) and the indices of its columns.
+        Per velocity filter and angle lead: the filter's time constant, the friction and
+        hysteresis columns they give (one per width) and their candidates, each the settings
+        it stands for (``friction_velocity``, ``friction_angle``, ``angle_lead``) and the
+        indices of its columns.
     settings : str
         The settings searched, for the error when the rows are too few.
 
@@ -149,7 +162,8 @@ def friction_search(base, target, recordings, searched, settings):
     -------
     table : DataFrame
         The settings of every candidate (``friction_velocity``: a width, a tuple of widths or
-        None; ``friction_angle``: a tuple of half-widths or None), ``velocity_filter``,
+        None; ``friction_angle``: a tuple of half-widths or None; ``angle_lead``),
+        ``velocity_filter``,
         ``n_friction_inputs`` (friction and hysteresis inputs), ``validation_rmse`` and
         ``chosen`` (by the rule of the module's docstring; the first of equal ones in the
         order of ``searched``).
@@ -260,7 +274,13 @@ def candidate_table(step, layout, values, y, positions, settings):
         else:
             radii = step.friction_angle_
             plays = [(radii, tuple(range(len(radii))))]
-    hysteresis = list(recording_hysteresis(angle, layout, radii).values()) if radii else []
+    leads = search_leads(step.angle_lead_) if radii else (None,)
+    hysteresis = {None: []}
+    for lead in leads if radii else ():
+        led = angle
+        if lead is not None:
+            led = led_angle(angle, values[:, positions[step.friction_column]], lead)
+        hysteresis[lead] = list(recording_hysteresis(led, layout, radii).values())
     velocity = None
     if step.friction_velocity is not None:
         velocity = values[:, positions[step.friction_column]]
@@ -279,15 +299,22 @@ def candidate_table(step, layout, values, y, positions, settings):
                 widths = friction_widths(step.friction_velocity_)
                 bands = [(step.friction_velocity_, tuple(range(len(widths))))]
         columns = list(friction_inputs(filtered, widths).values()) if widths else []
-        candidates = [
-            (
-                {"friction_velocity": band, "friction_angle": play},
-                (*band_columns, *(len(widths) + i for i in play_columns)),
-            )
-            for band, band_columns in bands
-            for play, play_columns in plays
-        ]
-        searched.append((time_constant, [*columns, *hysteresis], candidates))
+        for lead in leads:
+            # without plays a lead changes nothing: those candidates come with the first
+            candidates = [
+                (
+                    {
+                        "friction_velocity": band,
+                        "friction_angle": play,
+                        "angle_lead": None if play is None else lead,
+                    },
+                    (*band_columns, *(len(widths) + i for i in play_columns)),
+                )
+                for band, band_columns in bands
+                for play, play_columns in plays
+                if play is not None or lead == leads[0]
+            ]
+            searched.append((time_constant, [*columns, *hysteresis[lead]], candidates))
     return friction_search(
         np.column_stack([values, *loads.values()]),
         target,

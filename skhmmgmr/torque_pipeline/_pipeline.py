@@ -469,6 +469,7 @@ def make_torque_pipeline(
     sampling_period=None,
     output_smoothing="auto",
     friction_angle="auto",
+    angle_lead="auto",
     **params,
 ):
     """HMM-GMR behind the steering system's derived inputs: a scikit-learn ``Pipeline``.
@@ -490,7 +491,7 @@ def make_torque_pipeline(
     n_states : int, default=5
         Number of hidden states of the regressor; choose it on validation recordings
         (:class:`~skhmmgmr.StateSelector`, or a ``GridSearchCV`` over ``hmmgmr__n_states``).
-    friction_velocity, load_columns, powers, velocity_filter, friction_angle
+    friction_velocity, load_columns, powers, velocity_filter, friction_angle, angle_lead
         Passed to :class:`SteeringFeatures`. By default (``"auto"``) the friction inputs (a
         basis of one or several widths, from the narrowest the velocity resolves to the widest
         the data needs, or none), the hysteresis inputs (plays on the steering-wheel angle, or
@@ -537,7 +538,7 @@ def make_torque_pipeline(
         params,
         "make_torque_pipeline",
         "n_states, friction_velocity, load_columns, powers, velocity_filter, sampling_period, "
-        "output_smoothing, friction_angle",
+        "output_smoothing, friction_angle, angle_lead",
     )
     return TorquePipeline(
         [
@@ -550,6 +551,7 @@ def make_torque_pipeline(
                     velocity_filter=velocity_filter,
                     sampling_period=sampling_period,
                     friction_angle=friction_angle,
+                    angle_lead=angle_lead,
                 ),
             ),
             (

@@ -173,6 +173,8 @@ def _steering_dict(name, step):
     params = {key: _plain(_fitted_param(step, key)) for key in STEERING_PARAMS}
     if step.friction_angle_ is not None:  # the keys of the hysteresis inputs, when there are
         params |= {key: _plain(_fitted_param(step, key)) for key in HYSTERESIS_PARAMS}
+    if step.angle_lead_ is not None:  # and of their lead, when there is one
+        params["angle_lead"] = _plain(step.angle_lead_)
     return {
         "name": str(name),
         "type": STEERING_TYPE,

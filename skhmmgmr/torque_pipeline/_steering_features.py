@@ -23,19 +23,26 @@ from .._core._panel import in_filter_order
 from .._core._pickled import PickleVersionMixin
 from .._core._sequences import median_time_step
 from ._derived_inputs import (
-    check_widths,
+    check_settings,
     derived_names,
     derived_units,
     filter_decay,
     filtered_velocity,
+    fitted_friction,
+    fitted_lead,
+    fitted_radii,
     friction_inputs,
-    friction_names,
     friction_widths,
     hysteresis_names,
+    led_angle,
     load_inputs,
     recording_hysteresis,
 )
 from ._friction_search import AUTO, RADIUS_GRID, WIDTH_GRID, candidate_table
+
+AUTO_OPTION = StrOptions({AUTO})
+#: The settings ``fit`` may choose.
+LEARNED = ("friction_velocity", "velocity_filter", "friction_angle", "angle_lead")
 
 
 @fill_shared_parameters
@@ -79,6 +86,11 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         A missing angle gives missing hysteresis inputs and leaves the plays alone.
     angle_column : str or int, default="steering_wheel_angle"
         The column holding the steering-wheel angle, for ``friction_angle``.
+    angle_lead : float, "auto" or None, default=None
+        The plays follow ``angle + angle_lead * velocity`` (``friction_column``, unfiltered):
+        the velocity places an angle sensor's coarse steps (0.1 deg) within the twist of a
+        column that sticks. ``"auto"``: none, 0.02 or 0.05 s (``ANGLE_LEADS``), chosen in
+        ``fit`` with the plays. ``None`` (or 0): the angle itself.
     friction_column : str or int, default="steering_wheel_velocity"
         The column holding the steering-wheel velocity (a name, or a position for arrays).
     load_columns : tuple of str or int, default=("steering_wheel_angle", "lateral_acceleration")
@@ -112,13 +124,15 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         one), or the ones chosen (``None``: no hysteresis input).
     velocity_filter_ : float or None
         The velocity filter's time constant the transform uses (``None``: no filter).
+    angle_lead_ : float or None
+        The plays' lead on the velocity [s] (``None``: the angle itself, or no plays).
     sampling_period_ : float or None
         The seconds between two rows the velocity filter uses: ``sampling_period``, or the
         one read from the time index in ``fit`` (``None``: unknown).
     friction_search_ : DataFrame or None
         The ``"auto"`` choice: one row per candidate, with ``friction_velocity`` (a width, a
         tuple of widths or None), ``friction_angle`` (a tuple of half-widths or None),
-        ``velocity_filter``, ``n_friction_inputs`` (friction and hysteresis inputs),
+        ``velocity_filter``, ``angle_lead``, ``n_friction_inputs`` (friction and hysteresis inputs),
         ``validation_rmse`` (held-out root mean squared error of the linear fit, in the
         target's unit) and ``chosen``; ``None`` without an ``"auto"`` setting.
     n_features_in_ : int
@@ -186,6 +200,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             None,
         ],
         "sampling_period": [Interval(numbers.Real, 0, None, closed="neither"), None],
+        "angle_lead": [Interval(numbers.Real, None, None, closed="neither"), AUTO_OPTION, None],
     }
 
     def __init__(
@@ -198,6 +213,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         sampling_period=None,
         friction_angle=None,
         angle_column="steering_wheel_angle",
+        angle_lead=None,
     ):
         self.friction_velocity = friction_velocity
         self.friction_column = friction_column
@@ -207,6 +223,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         self.sampling_period = sampling_period
         self.friction_angle = friction_angle
         self.angle_column = angle_column
+        self.angle_lead = angle_lead
 
     __metadata_request__fit = {"groups": True}
     __metadata_request__transform = {"groups": True}
@@ -217,8 +234,11 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             state = {**state, "sampling_period_": state.get("sampling_period")}
         # one pickled before the hysteresis inputs existed had none
         state = {"friction_angle": None, "angle_column": "steering_wheel_angle", **state}
+        state = {"angle_lead": None, **state}
         if "n_features_in_" in state and "friction_angle_" not in state:
             state["friction_angle_"] = None
+        if "n_features_in_" in state and "angle_lead_" not in state:
+            state["angle_lead_"] = None
         super().__setstate__(state)
 
     @_fit_context(prefer_skip_nested_validation=True)
@@ -244,13 +264,14 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         """
         self._check_parameters()
         values = validate_data(self, X, ensure_all_finite="allow-nan", reset=True)
-        self.friction_velocity_ = _as_setting(self.friction_velocity)
-        self.friction_angle_ = _as_radii(self.friction_angle)
+        self.friction_velocity_ = fitted_friction(self.friction_velocity)
+        self.friction_angle_ = fitted_radii(self.friction_angle)
+        self.angle_lead_ = fitted_lead(self.angle_lead, self.friction_angle_)
         self._check_inputs()
         self.velocity_filter_ = None if self.friction_velocity is None else self.velocity_filter
         self.sampling_period_ = self.sampling_period
         self.friction_search_ = None
-        searched = AUTO in (self.friction_velocity_, self.velocity_filter_, self.friction_angle_)
+        searched = AUTO in self._learned()
         if searched and y is None:
             raise ValueError(
                 f"{self._settings()}: an 'auto' setting is chosen on the target, so fit needs "
@@ -275,44 +296,34 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
                     "seconds between two rows), or X with a 'time' index level to read it "
                     "from; got sampling_period=None."
                 )
-        if AUTO not in (self.friction_velocity_, self.velocity_filter_, self.friction_angle_):
+        if AUTO not in self._learned():
             return
         self.friction_search_ = candidate_table(
             self, layout, values, y, self._sources(), self._settings()
         )
         chosen = self.friction_search_[self.friction_search_["chosen"]].iloc[0]
-        self.friction_velocity_ = _as_setting(chosen["friction_velocity"])
-        self.friction_angle_ = _as_radii(chosen["friction_angle"])
+        self.friction_velocity_ = fitted_friction(chosen["friction_velocity"])
+        self.friction_angle_ = fitted_radii(chosen["friction_angle"])
         self.velocity_filter_ = chosen["velocity_filter"]
+        self.angle_lead_ = fitted_lead(chosen["angle_lead"], self.friction_angle_)
         if self.friction_velocity_ is None:
             self.velocity_filter_ = None
         elif self.velocity_filter_ is not None:
             self.velocity_filter_ = float(self.velocity_filter_)
+
+    def _learned(self):  # the settings fit may choose ("auto" before the choice)
+        return tuple(getattr(self, f"{name}_") for name in LEARNED)
 
     def _settings(self):
         """The settings searched, as the errors name them."""
         return (
             f"friction_velocity={self.friction_velocity!r}, "
             f"velocity_filter={self.velocity_filter!r}, "
-            f"friction_angle={self.friction_angle!r}"
+            f"friction_angle={self.friction_angle!r}, angle_lead={self.angle_lead!r}"
         )
 
-    def _check_parameters(self):
-        """What the parameters' constraints cannot say: the powers and the load columns."""
-        for power in self.powers:
-            if not isinstance(power, numbers.Integral) or isinstance(power, bool) or power < 2:
-                raise ValueError(
-                    f"powers must hold integers >= 2 (1 is the input itself); got {power!r} "
-                    f"in powers={self.powers!r}."
-                )
-        if len(set(self.powers)) != len(self.powers):
-            raise ValueError(f"powers={self.powers!r} repeats a power.")
-        if len(set(self.load_columns)) != len(self.load_columns):
-            raise ValueError(f"load_columns={self.load_columns!r} repeats a column.")
-        if isinstance(self.friction_velocity, tuple | list):
-            check_widths(self.friction_velocity, "friction_velocity", friction_names)
-        if isinstance(self.friction_angle, tuple | list):
-            check_widths(self.friction_angle, "friction_angle", hysteresis_names)
+    def _check_parameters(self):  # what the parameters' constraints cannot say
+        check_settings(self)
 
     def _check_inputs(self):
         """The fitted inputs hold the source columns and none of the derived ones."""
@@ -385,6 +396,10 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             derived.update(friction_inputs(velocity, self.friction_velocity_))
         if self.friction_angle_ is not None:
             angle = values[:, positions[self.angle_column]]
+            if self.angle_lead_ is not None:
+                angle = led_angle(
+                    angle, values[:, positions[self.friction_column]], self.angle_lead_
+                )
             plays = in_filter_order(self._play_in_filter_order, X, groups, rows={"angle": angle})
             derived.update(zip(hysteresis_names(self.friction_angle_), plays.T, strict=True))
         derived.update(load_inputs(values, positions, self.load_columns, self.powers))
@@ -455,6 +470,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             (``None`` without the filter), and ``sampling_period`` (``sampling_period_``);
             ``angle_position`` (the angle's position in the row, ``None`` without hysteresis
             inputs) and ``friction_angle`` (the list of the plays' half-widths);
+            ``angle_lead`` and ``lead_position`` (the velocity's position; ``None``
+            without a lead): the plays read ``angle + angle_lead * velocity``;
             ``load_positions`` (the load columns' positions) and ``powers``.
 
         Examples
@@ -472,7 +489,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         check_is_fitted(self, "n_features_in_")
         positions = self._sources()
         names = getattr(self, "feature_names_in_", None)
-        friction, radii = self.friction_velocity_, self.friction_angle_
+        friction, radii, lead = self.friction_velocity_, self.friction_angle_, self.angle_lead_
         filtered = friction is not None and self.velocity_filter_ is not None
         if isinstance(friction, tuple):
             friction = list(friction_widths(friction))
@@ -492,6 +509,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             else float(self.sampling_period_),
             "angle_position": None if radii is None else positions[self.angle_column],
             "friction_angle": None if radii is None else [float(r) for r in radii],
+            "angle_lead": None if lead is None else float(lead),
+            "lead_position": None if lead is None else positions[self.friction_column],
             "load_positions": [positions[column] for column in self.load_columns],
             "powers": [int(power) for power in self.powers],
         }
@@ -510,7 +529,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         needed = list(self.load_columns)
         if self.friction_angle is not None:
             needed.insert(0, self.angle_column)
-        if self.friction_velocity is not None:
+        led = self.angle_lead is not None and self.friction_angle is not None
+        if self.friction_velocity is not None or led:
             needed.insert(0, self.friction_column)
         names = getattr(self, "feature_names_in_", None)
         positions, missing = {}, []
@@ -555,7 +575,7 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
         caller_name="SteeringFeatures",
     )
     step._check_parameters()
-    for name in ("friction_velocity", "velocity_filter", "friction_angle"):
+    for name in ("friction_velocity", "velocity_filter", "friction_angle", "angle_lead"):
         if isinstance(params.get(name), str) and params[name] == AUTO:
             raise ValueError(
                 f"{name}='auto' is a setting to fit; a fitted step holds the chosen value."
@@ -565,8 +585,9 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
             f"velocity_filter={step.velocity_filter!r} needs sampling_period (the seconds "
             "between two rows); got sampling_period=None."
         )
-    step.friction_velocity_ = _as_setting(step.friction_velocity)
-    step.friction_angle_ = _as_radii(step.friction_angle)
+    step.friction_velocity_ = fitted_friction(step.friction_velocity)
+    step.friction_angle_ = fitted_radii(step.friction_angle)
+    step.angle_lead_ = fitted_lead(step.angle_lead, step.friction_angle_)
     step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
     step.sampling_period_ = step.sampling_period
     step.friction_search_ = None
@@ -575,19 +596,3 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
         step.feature_names_in_ = np.asarray(feature_names_in, dtype=object)
     step._check_inputs()
     return step
-
-
-def _as_setting(friction):
-    """A ``friction_velocity`` as the fitted step holds it: a basis as a tuple of floats."""
-    if isinstance(friction, tuple | list):
-        return friction_widths(friction)
-    return friction
-
-
-def _as_radii(radii):
-    """A ``friction_angle`` as the fitted step holds it: a tuple of floats (or None, "auto")."""
-    if isinstance(radii, tuple | list):
-        return tuple(float(r) for r in radii)
-    if radii is None or isinstance(radii, str):
-        return radii
-    return (float(radii),)
