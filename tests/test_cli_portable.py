@@ -196,8 +196,8 @@ def test_fit_reads_the_plays_and_the_friction_from_renamed_columns(files, capsys
     and --friction-column say which columns the plays and the friction read."""
     renames = {"steering_wheel_angle": "swa", "steering_wheel_velocity": "swv"}
     data = files["data"].rename(columns=renames)
-    path = files["folder"] / "renamed.csv"
-    data.to_csv(path, index=False)
+    path = files["folder"] / "renamed.parquet"  # exact floats (pandas 2.0's CSV parser is not)
+    data.to_parquet(path)
     model = files["folder"] / "renamed.json"
     inputs = [renames.get(name, name) for name in INPUTS]
     argv = ["fit", str(path), "--target", TARGET, "--n-states", "2", "--features", *inputs]
