@@ -71,7 +71,10 @@ def test_the_penalty_is_the_least_squares_fit_of_the_shifted_target(train):
         "heading_deviation_10m",
     ]
     settings = dict(friction_velocity=0.1, velocity_filter=None, output_smoothing=None)
-    driver = make_driver_model(perturbation_penalty=2.5, reg_covar=1e-12, **settings)
+    # the penalty in multiples of the perturbation (preview_columns=None)
+    driver = make_driver_model(
+        perturbation_penalty=2.5, preview_columns=None, reg_covar=1e-12, **settings
+    )
     driver = driver.fit(
         train[columns],
         train["driver_torque"],
@@ -112,13 +115,59 @@ def test_without_perturbation_or_penalty_it_is_the_torque_pipeline(train):
 
 def test_the_perturbation_penalises_a_pandas_or_2d_target_alike(train):
     p = train[PERTURBATION].to_numpy()
-    driver = make_driver_model(perturbation_penalty=1.5, random_state=0)
+    driver = make_driver_model(perturbation_penalty=1.5, preview_columns=None, random_state=0)
     as_series = driver._penalised_target(train["driver_torque"], p)
     assert as_series.index.equals(train.index)
     assert_allclose(as_series, train["driver_torque"] - 1.5 * p)
     column = driver._penalised_target(train[["driver_torque"]].to_numpy(), p)
     assert column.shape == (len(train), 1)
     assert_allclose(column[:, 0], as_series)
+
+
+def test_the_penalty_is_in_units_of_the_torque_perception_leaves_unexplained():
+    # By hand: the least-squares fit of y on a constant and the preview column x is the mean
+    # of y at x = 0 (1) and at x = 1 (4): e = (0, -1, 0, 1), sum e^2 = 2; sum p^2 = 0.5, so
+    # the unit is 4 and penalty 0.5 shifts y by 0.5 * 4 * p = 2 p.
+    X = pd.DataFrame({"x": [0.0, 1.0, 0.0, 1.0], "w": [1.0, -1.0, 1.0, -1.0]})
+    y = np.array([1.0, 3.0, 1.0, 5.0])
+    p = np.array([0.5, -0.5, 0.0, 0.0])
+    driver = make_driver_model(perturbation_penalty=0.5, preview_columns=("x",))
+    assert_allclose(driver._penalised_target(y, p, X), [0.0, 4.0, 1.0, 5.0], atol=1e-12)
+    assert driver.penalty_scale_ == pytest.approx(4.0, rel=1e-12)
+    assert driver.perturbed_share_ == 0.5
+    # the perturbation twice as strong: a quarter of the unit, half the shift
+    assert_allclose(driver._penalised_target(y, 2 * p, X), y - p, atol=1e-12)
+    assert driver.penalty_scale_ == pytest.approx(1.0, rel=1e-12)
+
+
+def test_scaling_the_torque_leaves_the_penalty_and_the_fit_in_proportion(train):
+    # Torque and perturbation in other units (c times): the unit of the penalty is a ratio of
+    # torques squared, so it stays, and the penalised target, the fit and its estimate are c
+    # times the first (one state: a least-squares fit).
+    X, y, p = train[FEATURES], train["driver_torque"], train[PERTURBATION].to_numpy()
+    settings = dict(sampling_period=1 / RATE, output_smoothing=None, random_state=0)
+    first = make_driver_model(**settings).fit(X, y, groups=train["recording"], perturbation=p)
+    target = first._penalised_target(y, p, X).to_numpy()
+    c = 9.81
+    other = make_driver_model(**settings)
+    other = other.fit(X, c * y, groups=train["recording"], perturbation=c * p)
+    assert other.penalty_scale_ == pytest.approx(first.penalty_scale_, rel=1e-9)
+    assert first.penalty_scale_ > 1
+    assert_allclose(other._penalised_target(c * y, c * p, X), c * target, rtol=1e-9)
+    estimate = first.predict(X, groups=train["recording"])
+    assert_allclose(other.predict(X, groups=train["recording"]), c * estimate, rtol=1e-6, atol=1e-9)
+
+
+def test_the_penalty_needs_the_preview_columns_by_name(train):
+    X, y, p = train[FEATURES], train["driver_torque"], train[PERTURBATION]
+    with pytest.raises(ValueError, match=r"X has no column names; .*preview_columns="):
+        make_driver_model().fit(X.to_numpy(), y, perturbation=p)
+    with pytest.raises(ValueError, match="X has no column 'road_curvature_30m'.*preview_col"):
+        make_driver_model().fit(X.drop(columns="road_curvature_30m"), y, perturbation=p)
+    # with penalty 0, or without a perturbation, it needs no preview
+    sighted = X.drop(columns=list(PREVIEW_FEATURES))
+    make_driver_model(perturbation_penalty=0.0).fit(sighted, y, perturbation=p)
+    make_driver_model().fit(sighted, y)
 
 
 @pytest.mark.parametrize(
@@ -179,15 +228,30 @@ def test_stream_model_file_and_horizon_need_no_perturbation(model, protocol, tmp
     loaded = portable.load(tmp_path / "driver.json")
     assert type(loaded) is DriverModel
     assert loaded.get_params()["perturbation_penalty"] == model.perturbation_penalty
-    assert (loaded.perturbation_rms_, loaded.perturbed_share_) == (
-        model.perturbation_rms_,
-        model.perturbed_share_,
-    )
+    assert loaded.get_params(deep=False).keys() == model.get_params(deep=False).keys()
+    for key in ("perturbation_penalty", "preview_columns"):
+        assert loaded.get_params()[key] == model.get_params()[key]
+    facts = ("perturbation_rms_", "perturbed_share_", "penalty_scale_")
+    assert [getattr(loaded, a) for a in facts] == [getattr(model, a) for a in facts]
     assert_array_equal(loaded.predict(test[FEATURES], groups=test["recording"]), expected)
     ahead = torque_ahead(
         model, horizons=(0.5,), duration=5.0, sampling_rate=RATE, random_state=1, start_every=25
     )
     assert ahead["estimate"].notna().all() and len(ahead) == 4
+
+
+def test_a_file_without_the_penalty_scale_holds_a_penalty_in_multiples(model, tmp_path):
+    # the first driver model's files: no preview_columns, no penalty_scale
+    import json
+
+    portable.save(model, tmp_path / "driver.json")
+    data = json.loads((tmp_path / "driver.json").read_text())
+    assert data["driver_model"]["preview_columns"] == list(PREVIEW_FEATURES)
+    assert data["driver_model"]["penalty_scale"] == model.penalty_scale_ > 1
+    del data["driver_model"]["preview_columns"], data["driver_model"]["penalty_scale"]
+    (tmp_path / "first.json").write_text(json.dumps(data))
+    loaded = portable.load(tmp_path / "first.json")
+    assert loaded.preview_columns is None and loaded.penalty_scale_ == 1.0
 
 
 def test_a_torque_pipelines_file_is_refused_as_a_driver_models(model, tmp_path):
@@ -239,7 +303,7 @@ def test_the_closed_loop_scorer_ranks_candidates_in_a_grid_search(protocol, trai
     roads = make_closed_loop_scorer(1, **SHORT)
     search = GridSearchCV(
         make_driver_model(sampling_period=1 / RATE, random_state=0),
-        {"perturbation_penalty": [0.0, 2.0]},
+        {"perturbation_penalty": [0.0, 0.2]},
         scoring={"closed_loop": roads, "performance": PerformanceScore(sampling_period=0.05)},
         refit="closed_loop",
         cv=GroupKFold(n_splits=2),
@@ -254,7 +318,7 @@ def test_the_closed_loop_scorer_ranks_candidates_in_a_grid_search(protocol, trai
         )
     scores = search.cv_results_["mean_test_closed_loop"]
     assert np.all(np.isfinite(scores)) and np.all(scores <= 0)
-    assert search.best_params_["perturbation_penalty"] == [0.0, 2.0][int(np.argmax(scores))]
+    assert search.best_params_["perturbation_penalty"] == [0.0, 0.2][int(np.argmax(scores))]
     assert isinstance(search.scorer_["closed_loop"], ClosedLoopScorer)
 
 

@@ -1,7 +1,7 @@
 """The driver model: the torque pipeline fitted on the recordings of a perturbation
 experiment, so that it estimates the driver's torque and drives the car (:class:`DriverModel`,
 :func:`make_driver_model`). Only ``fit`` differs from :class:`TorquePipeline`'s: it fits the
-penalised target ``y - perturbation_penalty * perturbation``."""
+penalised target ``y - perturbation_penalty * penalty_scale_ * perturbation``."""
 
 import numbers
 
@@ -11,11 +11,12 @@ from sklearn.pipeline import Pipeline
 
 from .._core._compat import Interval, validate_parameter_constraints
 from .._core._docstrings import fill_shared_parameters
+from ..datasets import PREVIEW_FEATURES
 from ._pipeline import TorquePipeline, check_regressor_params, make_torque_pipeline
 
-#: ``perturbation_penalty`` of :func:`make_driver_model` by default, measured by
-#: ``benchmarks/bench_driver_model.py`` (the frontier of accuracy and driving).
-DEFAULT_PERTURBATION_PENALTY = 1.0
+#: ``perturbation_penalty`` of :func:`make_driver_model` by default (in units of
+#: ``DriverModel.penalty_scale_``), measured by ``benchmarks/bench_driver_model.py``.
+DEFAULT_PERTURBATION_PENALTY = 0.07
 
 
 class DriverModel(TorquePipeline):
@@ -27,17 +28,28 @@ class DriverModel(TorquePipeline):
     it is), a positive feedback at the wheel. In the recordings of a perturbation experiment
     (:func:`skhmmgmr.datasets.make_driving_protocol` with ``perturbation=``) a torque that the
     driver does not know pushes the wheel: the inverse would follow it, the driver's torque
-    does not. ``fit`` penalises the estimate's covariance with that torque, by
-    ``perturbation_penalty``: it minimises
+    does not. ``fit`` penalises the estimate's covariance with that torque ``p``: it minimises
 
-    ``sum_t (y_t - f(x_t))^2 + 2 * perturbation_penalty * sum_t p_t f(x_t)``
+    ``sum_t (y_t - f(x_t))^2 + 2 * lam * sum_t p_t f(x_t)``
 
-    over the training rows (``p``: the perturbation), which is the least-squares fit of
-    ``y - perturbation_penalty * p``; the model is fitted on that target. The larger the
-    penalty, the less the model leans on the wheel's response to a torque at the wheel, and
-    the more on what the driver sees: the steadier it drives, the less accurately it
-    estimates recorded torque. Without perturbed training rows the penalty does nothing and
-    the model is a torque pipeline.
+    over the training rows, which is the least-squares fit of ``y - lam * p``; the model is
+    fitted on that target. The penalty ``lam`` is ``perturbation_penalty * penalty_scale_``,
+    in units of
+
+    ``penalty_scale_ = sum_t e_t^2 / sum_t p_t^2``,
+
+    ``e`` the residual of the least-squares fit of ``y`` on a constant and what the driver
+    sees ahead (``preview_columns``): the driver's torque that perception does not explain,
+    which moves the wheel as the perturbation does and which a plain fit attributes to the
+    wheel's state, over the perturbation's. The more of the driver's torque perception leaves
+    unexplained, the more the plain fit leans on the wheel, and the larger the penalty; the
+    fewer or the weaker the pushes, the larger too. Scaling the torque and the perturbation by
+    one factor leaves ``lam`` as it is. The larger the penalty, the less the model leans on
+    the response to a torque at the wheel, and the more on what the driver sees: the steadier
+    it drives (up to a point, see :func:`make_driver_model`), the less accurately it estimates
+    recorded torque. Without perturbed training rows the penalty does nothing and the model
+    is a torque pipeline. ``preview_columns=None`` gives ``lam`` in multiples of the
+    perturbation (``penalty_scale_ = 1``).
 
     Everything but ``fit`` is :class:`TorquePipeline`'s: ``predict``, the stream, the model
     file, the C code and the simulator's :func:`~skhmmgmr.datasets.drive` never need the
@@ -48,10 +60,15 @@ class DriverModel(TorquePipeline):
     steps : list of (str, estimator) tuples
         As for :class:`~sklearn.pipeline.Pipeline` (``SteeringFeatures`` steps then the
         regressor, as :func:`make_driver_model` builds them).
-    perturbation_penalty : float >= 0, default=1.0
+    perturbation_penalty : float >= 0, default=0.07
         The trade-off: how much ``fit`` keeps the estimate from following the perturbation's
-        push on the wheel (see above), in multiples of the perturbation. 0: the plain fit of
-        the recordings.
+        push (see above), in units of ``penalty_scale_`` (dimensionless; in multiples of the
+        perturbation with ``preview_columns=None``). 0: the plain fit of the recordings.
+    preview_columns : tuple of str or None, default=PREVIEW_FEATURES
+        Input columns of what the driver sees ahead, on which ``fit`` measures the torque that
+        perception does not explain (``penalty_scale_``, see above); ``fit`` needs them among
+        the columns of a DataFrame ``X`` when the perturbation pushed some rows. None: the
+        penalty is in multiples of the perturbation.
     transform_input, memory, verbose
         As for :class:`~sklearn.pipeline.Pipeline`.
 
@@ -61,6 +78,10 @@ class DriverModel(TorquePipeline):
         RMS [Nm] of the perturbation over the perturbed training rows (0 without any).
     perturbed_share_ : float
         Share of the training rows with a perturbation.
+    penalty_scale_ : float
+        The unit of ``perturbation_penalty`` (see above): the training rows' squared torque
+        that ``preview_columns`` does not explain over the perturbation's (1 with
+        ``preview_columns=None``, or without a perturbation).
 
     See Also
     --------
@@ -71,6 +92,7 @@ class DriverModel(TorquePipeline):
     _parameter_constraints = {
         **Pipeline._parameter_constraints,
         "perturbation_penalty": [Interval(numbers.Real, 0, None, closed="left")],
+        "preview_columns": [tuple, list, None],
     }
 
     def __init__(
@@ -78,20 +100,24 @@ class DriverModel(TorquePipeline):
         steps,
         *,
         perturbation_penalty=DEFAULT_PERTURBATION_PENALTY,
+        preview_columns=PREVIEW_FEATURES,
         transform_input=None,
         memory=None,
         verbose=False,
     ):
         super().__init__(steps, transform_input=transform_input, memory=memory, verbose=verbose)
         self.perturbation_penalty = perturbation_penalty
+        self.preview_columns = preview_columns
 
     def fit(self, X, y=None, groups=None, perturbation=None, **params):
-        """Fit every step on the penalised target ``y - perturbation_penalty * perturbation``.
+        """Fit every step on the penalised target ``y - lam * perturbation`` (``lam``:
+        ``perturbation_penalty * penalty_scale_``, see :class:`DriverModel`).
 
         Parameters
         ----------
         X : DataFrame or array-like of shape (n_samples, n_features)
-            Sensed inputs (the perturbation is not one of them).
+            Sensed inputs (the perturbation is not one of them); a DataFrame holding
+            ``preview_columns`` when the perturbation pushed some rows.
         y : array-like of shape (n_samples,) or (n_samples, 1)
             The driver's torque.
         groups : array-like of shape (n_samples,), default=None
@@ -112,13 +138,13 @@ class DriverModel(TorquePipeline):
             self.get_params(deep=False),
             caller_name=type(self).__name__,
         )
-        penalised = self._penalised_target(y, perturbation)
+        penalised = self._penalised_target(y, perturbation, X)
         return super().fit(X, penalised, groups=groups, **params)
 
-    def _penalised_target(self, y, perturbation):
-        """``y - perturbation_penalty * perturbation``, with the fitted facts of the
+    def _penalised_target(self, y, perturbation, X=None):
+        """``y - lam * perturbation`` (see the class), with the fitted facts of the
         perturbation; ``y`` as it was (a pandas object keeps its index)."""
-        self.perturbation_rms_, self.perturbed_share_ = 0.0, 0.0
+        self.perturbation_rms_, self.perturbed_share_, self.penalty_scale_ = 0.0, 0.0, 1.0
         if perturbation is None or y is None:
             return y
         torque = np.asarray(perturbation, dtype=float)
@@ -145,7 +171,11 @@ class DriverModel(TorquePipeline):
                 f"y has {np.shape(y)[1]} outputs; the perturbation penalises one, the driver's "
                 "torque."
             )
-        shift = self.perturbation_penalty * torque
+        if self.preview_columns is not None:
+            target = np.asarray(y, dtype=float).reshape(-1)
+            unexplained = _residual(target, _preview(X, self.preview_columns))
+            self.penalty_scale_ = float(unexplained @ unexplained / (torque @ torque))
+        shift = self.perturbation_penalty * self.penalty_scale_ * torque
         if isinstance(y, pd.DataFrame):
             return y.sub(shift, axis=0)
         if isinstance(y, pd.Series):
@@ -154,11 +184,35 @@ class DriverModel(TorquePipeline):
         return y - (shift[:, None] if y.ndim == 2 else shift)
 
 
+def _preview(X, names):
+    """The columns ``names`` of ``X`` as a float array; an error naming the first missing
+    column when ``X`` lacks one."""
+    names = list(names)
+    found = list(getattr(X, "columns", []))
+    missing = [name for name in names if name not in found]
+    if missing:
+        what = "X has no column names" if not found else f"X has no column {missing[0]!r}"
+        raise ValueError(
+            f"{what}; the perturbation penalty is in units of the torque that "
+            f"preview_columns={tuple(names)} do not explain: give X as a DataFrame with "
+            "them, or preview_columns=None for a penalty in multiples of the perturbation."
+        )
+    return np.asarray(X[names], dtype=float)
+
+
+def _residual(target, inputs):
+    """``target`` less its least-squares fit on a constant and ``inputs``."""
+    design = np.column_stack([np.ones(len(inputs)), inputs])
+    coef = np.linalg.lstsq(design, target, rcond=None)[0]
+    return target - design @ coef
+
+
 @fill_shared_parameters
 def make_driver_model(
     n_states=1,
     *,
     perturbation_penalty=DEFAULT_PERTURBATION_PENALTY,
+    preview_columns=PREVIEW_FEATURES,
     friction_velocity="auto",
     friction_column="steering_wheel_velocity",
     load_columns=("steering_wheel_angle", "lateral_acceleration"),
@@ -254,8 +308,8 @@ def make_driver_model(
     check_regressor_params(
         params,
         "make_driver_model",
-        "n_states, perturbation_penalty, friction_velocity, friction_column, load_columns, "
-        "powers, velocity_filter, sampling_period, output_smoothing",
+        "n_states, perturbation_penalty, preview_columns, friction_velocity, friction_column, "
+        "load_columns, powers, velocity_filter, sampling_period, output_smoothing",
     )
     pipeline = make_torque_pipeline(
         n_states,
@@ -272,4 +326,8 @@ def make_driver_model(
         **params,
     )
     pipeline.steps[0][1].set_params(friction_column=friction_column)
-    return DriverModel(pipeline.steps, perturbation_penalty=perturbation_penalty)
+    return DriverModel(
+        pipeline.steps,
+        perturbation_penalty=perturbation_penalty,
+        preview_columns=preview_columns,
+    )

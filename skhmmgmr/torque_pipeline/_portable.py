@@ -45,7 +45,10 @@ MODEL_TYPES = {
 DRIVER_MODEL_FACTS = {
     "perturbation_rms": "perturbation_rms_",
     "perturbed_share": "perturbed_share_",
+    "penalty_scale": "penalty_scale_",
 }
+#: Without ``preview_columns`` and ``penalty_scale`` (files of the first driver model) the
+#: block holds a penalty in multiples of the perturbation: ``preview_columns=None``, scale 1.
 STEERING_TYPE = "SteeringFeatures"
 STEERING_PARAMS = (
     "friction_velocity",
@@ -120,8 +123,10 @@ def model_to_dict(fitted, *, output_names, units, period):
         "steps": steps,
     }
     if model_type == "DriverModel":
+        preview = fitted.preview_columns
         data["driver_model"] = {
             "perturbation_penalty": float(fitted.perturbation_penalty),
+            "preview_columns": None if preview is None else [str(name) for name in preview],
             **{key: float(getattr(fitted, name)) for key, name in DRIVER_MODEL_FACTS.items()},
         }
     return data
@@ -251,9 +256,14 @@ def _pipeline_from_dict(data, cls):
     if cls is not DriverModel:
         return cls(steps), training
     block = data["driver_model"]
-    model = DriverModel(steps, perturbation_penalty=block["perturbation_penalty"])
+    preview = block.get("preview_columns")
+    model = DriverModel(
+        steps,
+        perturbation_penalty=block["perturbation_penalty"],
+        preview_columns=None if preview is None else tuple(preview),
+    )
     for key, name in DRIVER_MODEL_FACTS.items():
-        setattr(model, name, block[key])
+        setattr(model, name, block.get(key, 1.0))  # only penalty_scale may be absent
     return model, training
 
 
