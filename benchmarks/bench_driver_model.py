@@ -7,7 +7,8 @@ with a perturbation experiment in a third of the training recordings (``perturba
 RMS, ``perturbed_share=1/3``, the 3rd, 6th, 9th and 12th section; a
 multisine on the steering wheel that the driver does not know). Fitted:
 
-- ``driver``: ``make_driver_model()`` (one state, the default ``perturbation_penalty``) on
+- ``driver``: ``make_driver_model()`` (one state, the default ``perturbation_penalty``, in
+  units of the torque that ``PREVIEW_FEATURES`` leave unexplained) on
   ``DRIVER_MODEL_FEATURES`` of the perturbed training recordings, ``perturbation=`` their
   ``steering_perturbation``;
 - ``pipeline``: ``make_torque_pipeline(5)`` on the unperturbed training recordings (the
@@ -40,7 +41,10 @@ of the lane it aims at, which no model of the torque can know), on the same road
 (mean over the seeds) against the worst road's deviation ratio (and the roads lost), beside
 the pipeline's accuracy less one point (the accuracy target); ``--figure PATH`` writes it as
 a PNG. ``--states`` and
-``--drop`` change the driver model (its number of states, inputs it leaves out).
+``--drop`` change the driver model (its number of states, inputs it leaves out);
+``--penalty-unit perturbation`` gives ``--penalty`` / ``--penalties`` in multiples of the
+perturbation (``preview_columns=None``, the first driver model's unit: ``--penalty 1`` is the
+first default).
 
 Run with::
 
@@ -101,6 +105,13 @@ def _parse(argv=None):
         "--share", type=float, default=1 / 3, help="share of the training recordings perturbed"
     )
     parser.add_argument("--penalty", type=float, default=DEFAULT_PERTURBATION_PENALTY)
+    parser.add_argument(
+        "--penalty-unit",
+        choices=["preview", "perturbation"],
+        default="preview",
+        help="the penalty in units of the torque PREVIEW_FEATURES leave unexplained (the "
+        "default) or in multiples of the perturbation",
+    )
     parser.add_argument("--models", nargs="+", default=list(MODELS))
     parser.add_argument("--drop", nargs="*", default=[], help="inputs the driver model leaves out")
     parser.add_argument("--states", type=int, default=1, help="the driver model's n_states")
@@ -110,7 +121,9 @@ def _parse(argv=None):
     parser.add_argument("--jobs", type=int, default=1, help="cases in parallel")
     parser.add_argument("--quick", action="store_true", help="defensive, 100 Hz, default car")
     parser.add_argument("--frontier", action="store_true", help="the trade-off instead")
-    parser.add_argument("--penalties", nargs="+", type=float, default=[0, 0.5, 1, 1.5, 2, 3])
+    parser.add_argument(
+        "--penalties", nargs="+", type=float, default=[0, 0.025, 0.05, 0.07, 0.1, 0.15]
+    )
     parser.add_argument("--figure", default=None, help="PNG of the frontier")
     parser.add_argument("--output", default=None, help="CSV of every road's figures")
     parser.add_argument("--road-figure", default=None, help="PNG of one road, human and models")
@@ -146,7 +159,9 @@ def protocols(style, rate, car, seed, args):
     return plain, perturbed
 
 
-def fit(name, plain, perturbed, rate, penalty, drop=(), n_states=1, smoothing="auto"):
+def fit(
+    name, plain, perturbed, rate, penalty, drop=(), n_states=1, smoothing="auto", unit="preview"
+):
     """The model ``name`` of the module docstring, fitted on its training recordings."""
     train = (perturbed if name == "driver" else plain).query("split == 'train'")
     X, y, groups = train[FEATURES], train["driver_torque"], train["recording"]
@@ -156,6 +171,7 @@ def fit(name, plain, perturbed, rate, penalty, drop=(), n_states=1, smoothing="a
             n_states,
             sampling_period=1 / rate,
             perturbation_penalty=penalty,
+            preview_columns=PREVIEW_FEATURES if unit == "preview" else None,
             output_smoothing=smoothing,
             random_state=0,
         )
@@ -255,7 +271,15 @@ def run_case(style, rate, car, seed, args, specs=None):
         for name, penalty in specs:
             start = time.perf_counter()
             model = fit(
-                name, plain, perturbed, rate, penalty, args.drop, args.states, args.smoothing
+                name,
+                plain,
+                perturbed,
+                rate,
+                penalty,
+                args.drop,
+                args.states,
+                args.smoothing,
+                args.penalty_unit,
             )
             fitted = time.perf_counter() - start
             case = dict(style=style, rate=rate, car=car or "default", seed=seed, model=name)
@@ -483,7 +507,15 @@ def road_figure(args, path):
         warnings.simplefilter("ignore")
         for name, label in [("driver", "driver model"), ("pipeline", "torque pipeline")]:
             model = fit(
-                name, plain, perturbed, rate, args.penalty, args.drop, args.states, args.smoothing
+                name,
+                plain,
+                perturbed,
+                rate,
+                args.penalty,
+                args.drop,
+                args.states,
+                args.smoothing,
+                args.penalty_unit,
             )
             runs[label] = drive(model, **road)
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)

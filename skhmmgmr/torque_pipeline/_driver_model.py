@@ -250,18 +250,24 @@ def make_driver_model(
         The states are not what the accuracy lacks: the torque pipeline with one state is
         within 0.2 points of five; the inputs left out for the wheel (the steering wheel's
         acceleration, the load's cube, the plays) cost 0.7-1.2 points.
-    perturbation_penalty : float >= 0, default=1.0
+    perturbation_penalty : float >= 0, default=0.07
         The trade-off between the open-loop accuracy and the driving: how much ``fit`` keeps
         the estimate from following the perturbation's push on the wheel (see
-        :class:`DriverModel`), in multiples of the perturbation. 0: the plain fit of the
-        perturbed recordings. The default is the smallest value at which the model kept
-        control on every held-out road of the simulator's three styles at 20 and 100 Hz
-        (reference car, one seed; over 4 cars and 3 seeds it lost 19 of 504 roads),
-        trained with a 0.2 Nm perturbation in a third of the training recordings (the
-        frontier and the targets are in the user guide's "The driver model at the wheel");
-        the simulator's novice needed more, its aggressive driver less, and an experiment
-        with 0.1 Nm in every training recording 1.5-2. Choose it for your experiment and
-        driver with :func:`skhmmgmr.selection.make_closed_loop_scorer`.
+        :class:`DriverModel`), in units of ``penalty_scale_``, the training rows' squared
+        torque that ``preview_columns`` leave unexplained over the perturbation's
+        (dimensionless). 0: the plain fit of the perturbed recordings. Measured on the
+        simulator with a 0.2 Nm perturbation in a third of the training recordings
+        (``benchmarks/bench_driver_model.py``; the user guide's "The driver model at the
+        wheel"): the unit is about 9 for its aggressive driver, 17-20 for the defensive one
+        and 26 for the novice, so that 0.07 penalises them 0.6, 1.2-1.4 and 1.8 times the
+        perturbation, the order of what each wanted in multiples of the perturbation (0-1,
+        1-2, 2-3); FILL. Larger values drive
+        steadier until the wheel spins (0.12: 5 of 7 roads lost, novice, 20 Hz). Choose it for
+        your experiment and driver with :func:`skhmmgmr.selection.make_closed_loop_scorer`.
+    preview_columns : tuple of str or None, default=PREVIEW_FEATURES
+        Passed to :class:`DriverModel`: the columns of what the driver sees ahead, on which
+        ``fit`` measures the unit of the penalty. None: the penalty in multiples of the
+        perturbation.
     friction_velocity, friction_column, load_columns, powers, velocity_filter
         Passed to :class:`SteeringFeatures` (see :func:`make_torque_pipeline`). The load's
         signed square only (``powers=(2,)``): a cube makes the torque grow without bound
