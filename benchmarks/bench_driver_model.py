@@ -7,8 +7,7 @@ with a perturbation experiment in a third of the training recordings (``perturba
 RMS, ``perturbed_share=1/3``, the 3rd, 6th, 9th and 12th section; a
 multisine on the steering wheel that the driver does not know). Fitted:
 
-- ``driver``: ``make_driver_model()`` (one state, the default ``perturbation_penalty``, in
-  units of the torque that ``PREVIEW_FEATURES`` leave unexplained) on
+- ``driver``: ``make_driver_model()`` (one state, the default ``perturbation_penalty``) on
   ``DRIVER_MODEL_FEATURES`` of the perturbed training recordings, ``perturbation=`` their
   ``steering_perturbation``;
 - ``pipeline``: ``make_torque_pipeline(5)`` on the unperturbed training recordings (the
@@ -42,9 +41,9 @@ of the lane it aims at, which no model of the torque can know), on the same road
 the pipeline's accuracy less one point (the accuracy target); ``--figure PATH`` writes it as
 a PNG. ``--states`` and
 ``--drop`` change the driver model (its number of states, inputs it leaves out);
-``--penalty-unit perturbation`` gives ``--penalty`` / ``--penalties`` in multiples of the
-perturbation (``preview_columns=None``, the first driver model's unit: ``--penalty 1`` is the
-first default).
+``--penalty-unit preview`` gives ``--penalty`` / ``--penalties`` in units of the torque that
+``PREVIEW_FEATURES`` leave unexplained (``preview_columns=PREVIEW_FEATURES``; for example
+``--penalty 0.07 --penalty-unit preview``) instead of multiples of the perturbation.
 
 Run with::
 
@@ -108,9 +107,9 @@ def _parse(argv=None):
     parser.add_argument(
         "--penalty-unit",
         choices=["preview", "perturbation"],
-        default="preview",
-        help="the penalty in units of the torque PREVIEW_FEATURES leave unexplained (the "
-        "default) or in multiples of the perturbation",
+        default="perturbation",
+        help="the penalty in multiples of the perturbation (the default) or in units of the "
+        "torque PREVIEW_FEATURES leave unexplained",
     )
     parser.add_argument("--models", nargs="+", default=list(MODELS))
     parser.add_argument("--drop", nargs="*", default=[], help="inputs the driver model leaves out")
@@ -121,9 +120,7 @@ def _parse(argv=None):
     parser.add_argument("--jobs", type=int, default=1, help="cases in parallel")
     parser.add_argument("--quick", action="store_true", help="defensive, 100 Hz, default car")
     parser.add_argument("--frontier", action="store_true", help="the trade-off instead")
-    parser.add_argument(
-        "--penalties", nargs="+", type=float, default=[0, 0.025, 0.05, 0.07, 0.1, 0.15]
-    )
+    parser.add_argument("--penalties", nargs="+", type=float, default=[0, 0.5, 1, 1.5, 2, 3])
     parser.add_argument("--figure", default=None, help="PNG of the frontier")
     parser.add_argument("--output", default=None, help="CSV of every road's figures")
     parser.add_argument("--road-figure", default=None, help="PNG of one road, human and models")
@@ -160,7 +157,15 @@ def protocols(style, rate, car, seed, args):
 
 
 def fit(
-    name, plain, perturbed, rate, penalty, drop=(), n_states=1, smoothing="auto", unit="preview"
+    name,
+    plain,
+    perturbed,
+    rate,
+    penalty,
+    drop=(),
+    n_states=1,
+    smoothing="auto",
+    unit="perturbation",
 ):
     """The model ``name`` of the module docstring, fitted on its training recordings."""
     train = (perturbed if name == "driver" else plain).query("split == 'train'")

@@ -71,10 +71,8 @@ def test_the_penalty_is_the_least_squares_fit_of_the_shifted_target(train):
         "heading_deviation_10m",
     ]
     settings = dict(friction_velocity=0.1, velocity_filter=None, output_smoothing=None)
-    # the penalty in multiples of the perturbation (preview_columns=None)
-    driver = make_driver_model(
-        perturbation_penalty=2.5, preview_columns=None, reg_covar=1e-12, **settings
-    )
+    # the penalty in multiples of the perturbation (preview_columns=None, the default)
+    driver = make_driver_model(perturbation_penalty=2.5, reg_covar=1e-12, **settings)
     driver = driver.fit(
         train[columns],
         train["driver_torque"],
@@ -115,7 +113,7 @@ def test_without_perturbation_or_penalty_it_is_the_torque_pipeline(train):
 
 def test_the_perturbation_penalises_a_pandas_or_2d_target_alike(train):
     p = train[PERTURBATION].to_numpy()
-    driver = make_driver_model(perturbation_penalty=1.5, preview_columns=None, random_state=0)
+    driver = make_driver_model(perturbation_penalty=1.5, random_state=0)
     as_series = driver._penalised_target(train["driver_torque"], p)
     assert as_series.index.equals(train.index)
     assert_allclose(as_series, train["driver_torque"] - 1.5 * p)
@@ -145,7 +143,13 @@ def test_scaling_the_torque_leaves_the_penalty_and_the_fit_in_proportion(train):
     # torques squared, so it stays, and the penalised target, the fit and its estimate are c
     # times the first (one state: a least-squares fit).
     X, y, p = train[FEATURES], train["driver_torque"], train[PERTURBATION].to_numpy()
-    settings = dict(sampling_period=1 / RATE, output_smoothing=None, random_state=0)
+    settings = dict(
+        sampling_period=1 / RATE,
+        output_smoothing=None,
+        preview_columns=PREVIEW_FEATURES,
+        perturbation_penalty=0.07,
+        random_state=0,
+    )
     first = make_driver_model(**settings).fit(X, y, groups=train["recording"], perturbation=p)
     target = first._penalised_target(y, p, X).to_numpy()
     c = 9.81
@@ -160,14 +164,16 @@ def test_scaling_the_torque_leaves_the_penalty_and_the_fit_in_proportion(train):
 
 def test_the_penalty_needs_the_preview_columns_by_name(train):
     X, y, p = train[FEATURES], train["driver_torque"], train[PERTURBATION]
+    sighted = make_driver_model(preview_columns=PREVIEW_FEATURES)
     with pytest.raises(ValueError, match=r"X has no column names; .*preview_columns="):
-        make_driver_model().fit(X.to_numpy(), y, perturbation=p)
+        sighted.fit(X.to_numpy(), y, perturbation=p)
     with pytest.raises(ValueError, match="X has no column 'road_curvature_30m'.*preview_col"):
-        make_driver_model().fit(X.drop(columns="road_curvature_30m"), y, perturbation=p)
-    # with penalty 0, or without a perturbation, it needs no preview
-    sighted = X.drop(columns=list(PREVIEW_FEATURES))
-    make_driver_model(perturbation_penalty=0.0).fit(sighted, y, perturbation=p)
-    make_driver_model().fit(sighted, y)
+        sighted.fit(X.drop(columns="road_curvature_30m"), y, perturbation=p)
+    # with penalty 0, without a perturbation or in multiples of it, it needs no preview
+    blind = X.drop(columns=list(PREVIEW_FEATURES))
+    sighted.set_params(perturbation_penalty=0.0).fit(blind, y, perturbation=p)
+    make_driver_model(preview_columns=PREVIEW_FEATURES).fit(blind, y)
+    assert make_driver_model().fit(blind, y, perturbation=p).penalty_scale_ == 1.0
 
 
 @pytest.mark.parametrize(
@@ -240,14 +246,20 @@ def test_stream_model_file_and_horizon_need_no_perturbation(model, protocol, tmp
     assert ahead["estimate"].notna().all() and len(ahead) == 4
 
 
-def test_a_file_without_the_penalty_scale_holds_a_penalty_in_multiples(model, tmp_path):
-    # the first driver model's files: no preview_columns, no penalty_scale
+def test_the_file_keeps_the_unit_of_the_penalty(train, tmp_path):
+    # in units of the preview's unexplained torque; a file without the unit (the first driver
+    # model's) holds a penalty in multiples of the perturbation
     import json
 
+    model = make_driver_model(
+        perturbation_penalty=0.07, preview_columns=PREVIEW_FEATURES, random_state=0
+    )
+    model = _fit(model, train, perturbation=train[PERTURBATION])
     portable.save(model, tmp_path / "driver.json")
+    loaded = portable.load(tmp_path / "driver.json")
+    assert loaded.preview_columns == PREVIEW_FEATURES
+    assert loaded.penalty_scale_ == model.penalty_scale_ > 1
     data = json.loads((tmp_path / "driver.json").read_text())
-    assert data["driver_model"]["preview_columns"] == list(PREVIEW_FEATURES)
-    assert data["driver_model"]["penalty_scale"] == model.penalty_scale_ > 1
     del data["driver_model"]["preview_columns"], data["driver_model"]["penalty_scale"]
     (tmp_path / "first.json").write_text(json.dumps(data))
     loaded = portable.load(tmp_path / "first.json")
@@ -303,7 +315,7 @@ def test_the_closed_loop_scorer_ranks_candidates_in_a_grid_search(protocol, trai
     roads = make_closed_loop_scorer(1, **SHORT)
     search = GridSearchCV(
         make_driver_model(sampling_period=1 / RATE, random_state=0),
-        {"perturbation_penalty": [0.0, 0.2]},
+        {"perturbation_penalty": [0.0, 2.0]},
         scoring={"closed_loop": roads, "performance": PerformanceScore(sampling_period=0.05)},
         refit="closed_loop",
         cv=GroupKFold(n_splits=2),
@@ -318,7 +330,7 @@ def test_the_closed_loop_scorer_ranks_candidates_in_a_grid_search(protocol, trai
         )
     scores = search.cv_results_["mean_test_closed_loop"]
     assert np.all(np.isfinite(scores)) and np.all(scores <= 0)
-    assert search.best_params_["perturbation_penalty"] == [0.0, 0.2][int(np.argmax(scores))]
+    assert search.best_params_["perturbation_penalty"] == [0.0, 2.0][int(np.argmax(scores))]
     assert isinstance(search.scorer_["closed_loop"], ClosedLoopScorer)
 
 
