@@ -43,7 +43,10 @@ a PNG. ``--states`` and
 ``--drop`` change the driver model (its number of states, inputs it leaves out);
 ``--penalty-unit preview`` gives ``--penalty`` / ``--penalties`` in units of the torque that
 ``PREVIEW_FEATURES`` leave unexplained (``preview_columns=PREVIEW_FEATURES``; for example
-``--penalty 0.07 --penalty-unit preview``) instead of multiples of the perturbation.
+``--penalty 0.07 --penalty-unit preview``) instead of multiples of the perturbation;
+``--penalty-unit share`` multiplies ``--penalty`` by the share of the training torque's
+variance that ``PREVIEW_FEATURES`` leave unexplained (1 - R^2; ``--penalty 12.5``), a unit
+measured here only.
 
 Run with::
 
@@ -106,10 +109,11 @@ def _parse(argv=None):
     parser.add_argument("--penalty", type=float, default=DEFAULT_PERTURBATION_PENALTY)
     parser.add_argument(
         "--penalty-unit",
-        choices=["preview", "perturbation"],
+        choices=["preview", "perturbation", "share"],
         default="perturbation",
-        help="the penalty in multiples of the perturbation (the default) or in units of the "
-        "torque PREVIEW_FEATURES leave unexplained",
+        help="the penalty in multiples of the perturbation (the default), in units of the "
+        "torque PREVIEW_FEATURES leave unexplained, or in multiples of the perturbation per "
+        "share of the torque's variance they leave unexplained",
     )
     parser.add_argument("--models", nargs="+", default=list(MODELS))
     parser.add_argument("--drop", nargs="*", default=[], help="inputs the driver model leaves out")
@@ -172,6 +176,8 @@ def fit(
     X, y, groups = train[FEATURES], train["driver_torque"], train["recording"]
     if name == "driver":
         X = train[[name for name in DRIVER_MODEL_FEATURES if name not in drop]]
+        if unit == "share":
+            penalty = penalty * unexplained_share(train)
         model = make_driver_model(
             n_states,
             sampling_period=1 / rate,
@@ -190,6 +196,15 @@ def fit(
             train[list(PREVIEW_FEATURES)], y, groups=groups
         )
     return HistGradientBoostingRegressor(random_state=0).fit(X.to_numpy(), y)
+
+
+def unexplained_share(train):
+    """The share of the training torque's variance that a least-squares fit on
+    ``PREVIEW_FEATURES`` leaves unexplained (1 - R^2)."""
+    y = train["driver_torque"].to_numpy()
+    design = np.column_stack([np.ones(len(train)), train[list(PREVIEW_FEATURES)].to_numpy()])
+    residual = y - design @ np.linalg.lstsq(design, y, rcond=None)[0]
+    return float(residual @ residual / np.sum((y - y.mean()) ** 2))
 
 
 def as_driver(name, model):
