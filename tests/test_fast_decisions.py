@@ -20,6 +20,7 @@ from skhmmgmr.selection._search._decisions import (
     units_to_confirm,
 )
 from skhmmgmr.selection._search._score_tables import rescore_table
+from skhmmgmr.selection._selectors._forward_paths import ForwardPath, settled_prefix
 
 MODELS = {0: ("a",), 1: ("a", "b"), 2: ("c",)}
 LABELS = ["50/50", "80/20"]
@@ -209,3 +210,27 @@ def test_the_fast_wrappers_decide_as_the_full_ones_within_the_measured_bound(sea
     fast = ForwardFeatureSelector(search="fast", **forward).fit(X, y, groups=groups)
     assert fast.subset_ == full.subset_
     assert _candidates(fast, grid) == _candidates(full, grid)
+
+
+def test_a_forward_path_is_settled_up_to_its_first_open_decision():
+    # options' scores: (0,) is clearly first; then (0, 1) and (0, 2) are within 1 % of each
+    # other (an open choice), and the path stops after one of them
+    values = {(0,): 1.0, (1,): 2.0, (2,): 3.0, (0, 1): 0.800, (0, 2): 0.801, (1, 2): 2.0}
+    values[0, 1, 2] = 0.799  # a gain of 0.1 %, below the 1 % rule
+    path = ForwardPath(3, tol=0.01, max_features=3)
+    while path.active:
+        path.step(values.get)
+    assert path.selected == (0, 1)
+    assert settled_prefix(path, values.get, set(), 0.01) == ((0,), False)
+    # with the two fitted in full the choice is settled, and so is the stop: every option of
+    # the last step is fitted in full too
+    assert settled_prefix(path, values.get, set(values), 0.01) == ((0, 1), True)
+    # a bound of 0.01 % settles the choice (0.125 % apart) and the stop (a gain of 0.125 %
+    # against the 1 % rule)
+    assert settled_prefix(path, values.get, set(), 0.0001) == ((0, 1), True)
+    # a gain of 0.875 % read through a bound of 0.5 % may be above 1 %: the stop is open
+    near_rule = {**values, (0, 1, 2): 0.793}
+    assert settled_prefix(path, near_rule.get, {(0, 1), (0, 2)}, 0.005) == ((0, 1), False)
+    # a path that took an option the scores known now make second is open from that step
+    changed = {**values, (0, 2): 0.7}
+    assert settled_prefix(path, changed.get, set(values), 0.01) == ((0,), False)
