@@ -328,3 +328,39 @@ def check_settings(step):
         real = isinstance(value, numbers.Real) and not isinstance(value, bool)
         if real and not math.isfinite(value):
             raise ValueError(f"{name} must be finite; got {name}={value!r}.")
+
+
+def source_positions(step):
+    """Position of every source column of ``step`` (a ``SteeringFeatures`` in its ``fit`` or
+    after), with an error naming the missing ones."""
+    needed = list(step.load_columns)
+    if step.friction_angle is not None:
+        needed.insert(0, step.angle_column)
+    led = step.angle_lead is not None and step.friction_angle is not None
+    if step.friction_velocity is not None or led:
+        needed.insert(0, step.friction_column)
+    names = getattr(step, "feature_names_in_", None)
+    positions, missing = {}, []
+    for column in needed:
+        if isinstance(column, str):
+            if names is None or column not in names:
+                missing.append(column)
+            else:
+                positions[column] = int(np.flatnonzero(names == column)[0])
+        elif isinstance(column, numbers.Integral) and not isinstance(column, bool):
+            if column >= step.n_features_in_:
+                missing.append(column)
+            positions[column] = int(column)
+        else:
+            raise TypeError(f"columns are names or positions; got {column!r}.")
+    if missing:
+        where = (
+            "X has no column names (pass a DataFrame, or positions for an array)"
+            if names is None
+            else f"X has columns {list(names)}"
+        )
+        raise ValueError(
+            f"SteeringFeatures needs the column(s) {missing} (friction_column / "
+            f"angle_column / load_columns); {where}."
+        )
+    return positions

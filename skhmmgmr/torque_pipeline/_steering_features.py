@@ -17,7 +17,7 @@ import pandas as pd
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._core._compat import Interval, StrOptions, _fit_context, validate_parameter_constraints
+from .._core._compat import Interval, StrOptions, _fit_context
 from .._core._docstrings import fill_shared_parameters
 from .._core._panel import in_filter_order
 from .._core._pickled import PickleVersionMixin
@@ -39,6 +39,7 @@ from ._derived_inputs import (
     led_angle,
     load_inputs,
     recording_hysteresis,
+    source_positions,
 )
 from ._friction_search import AUTO, RADIUS_GRID, WIDTH_GRID, candidate_table
 
@@ -331,7 +332,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         if AUTO not in self._learned():
             return
         self.friction_search_ = candidate_table(
-            self, layout, values, y, self._sources(), self._settings()
+            self, layout, values, y, source_positions(self), self._settings()
         )
         chosen = self.friction_search_[self.friction_search_["chosen"]].iloc[0]
         self.friction_velocity_ = fitted_friction(chosen["friction_velocity"])
@@ -371,7 +372,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
 
     def _check_inputs(self):
         """The fitted inputs hold the source columns and none of the derived ones."""
-        self._sources()
+        source_positions(self)
         inputs = [str(name) for name in getattr(self, "feature_names_in_", ())]
         taken = [name for name in self._derived_names() if name in inputs]
         if taken:
@@ -429,7 +430,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         named = isinstance(X, pd.DataFrame) and hasattr(self, "feature_names_in_")
         frame = X if named else None
         values = validate_data(self, X, ensure_all_finite="allow-nan", reset=False)
-        positions = self._sources()
+        positions = source_positions(self)
         derived = {}
         if self.friction_velocity_ is not None:
             measured = values[:, positions[self.friction_column]]
@@ -545,7 +546,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         0.6065
         """
         check_is_fitted(self, "n_features_in_")
-        positions = self._sources()
+        positions = source_positions(self)
         names = getattr(self, "feature_names_in_", None)
         friction, radii, lead = self.friction_velocity_, self.friction_angle_, self.angle_lead_
         slow = self.slow_velocity_filter_
@@ -587,77 +588,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         slow = self.slow_velocity_filter_
         return derived_names(friction, self.load_columns, self.powers, radii, slow)
 
-    def _sources(self):
-        """Position of every source column, with an error naming the missing ones."""
-        needed = list(self.load_columns)
-        if self.friction_angle is not None:
-            needed.insert(0, self.angle_column)
-        led = self.angle_lead is not None and self.friction_angle is not None
-        if self.friction_velocity is not None or led:
-            needed.insert(0, self.friction_column)
-        names = getattr(self, "feature_names_in_", None)
-        positions, missing = {}, []
-        for column in needed:
-            if isinstance(column, str):
-                if names is None or column not in names:
-                    missing.append(column)
-                else:
-                    positions[column] = int(np.flatnonzero(names == column)[0])
-            elif isinstance(column, numbers.Integral) and not isinstance(column, bool):
-                if column >= self.n_features_in_:
-                    missing.append(column)
-                positions[column] = int(column)
-            else:
-                raise TypeError(f"columns are names or positions; got {column!r}.")
-        if missing:
-            where = (
-                "X has no column names (pass a DataFrame, or positions for an array)"
-                if names is None
-                else f"X has columns {list(names)}"
-            )
-            raise ValueError(
-                f"SteeringFeatures needs the column(s) {missing} (friction_column / "
-                f"angle_column / load_columns); {where}."
-            )
-        return positions
-
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.input_tags.allow_nan = True
         tags.requires_fit = True
         return tags
-
-
-def restore_steering_features(params, n_features_in, feature_names_in=None):
-    """A fitted :class:`SteeringFeatures` from its parameters and fitted facts (a step of the
-    portable model file), refused as ``fit`` would refuse them."""
-    step = SteeringFeatures(**params)
-    validate_parameter_constraints(
-        SteeringFeatures._parameter_constraints,
-        step.get_params(deep=False),
-        caller_name="SteeringFeatures",
-    )
-    step._check_parameters()
-    for name in LEARNED:
-        if isinstance(params.get(name), str) and params[name] == AUTO:
-            raise ValueError(
-                f"{name}='auto' is a setting to fit; a fitted step holds the chosen value."
-            )
-    for name in ("velocity_filter", "slow_velocity_filter"):
-        if getattr(step, name) is not None and step.sampling_period is None:
-            raise ValueError(
-                f"{name}={getattr(step, name)!r} needs sampling_period (the seconds between "
-                "two rows); got sampling_period=None."
-            )
-    step.friction_velocity_ = fitted_friction(step.friction_velocity)
-    step.friction_angle_ = fitted_radii(step.friction_angle)
-    step.angle_lead_ = fitted_lead(step.angle_lead, step.friction_angle_)
-    step.slow_velocity_filter_ = fitted_slow(step.slow_velocity_filter, step.friction_velocity)
-    step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
-    step.sampling_period_ = step.sampling_period
-    step.friction_search_ = None
-    step.n_features_in_ = n_features_in
-    if feature_names_in is not None:
-        step.feature_names_in_ = np.asarray(feature_names_in, dtype=object)
-    step._check_inputs()
-    return step
