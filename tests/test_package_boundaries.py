@@ -40,11 +40,6 @@ ALLOWED_PRIVATE_ACCESS: set[tuple[str, str]] = {
     # an hmmlearn model or a FittedHMMGMR) and checks its parameters against the estimator
     # class's own constraints, as fit does: scikit-learn's convention for them is this name.
     ("_io.py", "_parameter_constraints"),
-    # The model file's writer and reader ask a regressor class what its file holds: its
-    # ``model_type`` and the parameters the file keeps (the hierarchical regressor's fitted
-    # manoeuvres), the two hooks of the estimator's model I/O mixin (``estimator/_io.py``).
-    ("_portable.py", "_portable_type"),
-    ("_portable.py", "_portable_params"),
     # The command line checks an option that sets a model's parameter (--output-smoothing,
     # --sampling-period...) by that parameter's own constraint when it parses it, so that the
     # command line and the API refuse the same values alike, with no rule restated.

@@ -5,7 +5,11 @@ which reads and writes whole files (the regressor, or a pipeline whose last step
 block). This module writes and reads the regressor's dict: :func:`to_dict` of a
 :class:`~skhmmgmr.FittedHMMGMR`, :func:`read_model` back, and those of an estimator
 (:func:`estimator_to_dict`, :func:`estimator_from_dict`): the estimator's parameters, fit
-information and training facts travel with the model. Every file is checked against the
+information and training facts travel with the model. An estimator says what its file holds
+by a protocol in the manner of scikit-learn's ``__sklearn_tags__``: its class attribute
+``__skhmmgmr_model_type__`` (the file's ``model_type``) and its method
+``__skhmmgmr_file_params__()`` (the parameters the file keeps, ``estimator_params``), so that
+this module reads no private hook of a higher layer. Every file is checked against the
 format's JSON Schema (``skhmmgmr/portable_schema.json``) by :func:`check_model_file` before
 anything is read from it; what the schema cannot say (array sizes across keys, the numerical
 checks) is checked here.
@@ -272,8 +276,8 @@ def estimator_to_dict(estimator, *, output_names=None, training=None):
         output_names = getattr(estimator, "output_names_", None)
     return to_dict(
         estimator.model_,
-        model_type=estimator._portable_type,
-        estimator_params=estimator._portable_params(),
+        model_type=estimator.__skhmmgmr_model_type__,
+        estimator_params=estimator.__skhmmgmr_file_params__(),
         fit_info={key: getattr(estimator, key + "_", None) for key in FIT_INFO_KEYS},
         output_names=None if output_names is None else list(output_names),
         training={"longest_recording": longest, **(training or {})},
@@ -286,9 +290,10 @@ def estimator_from_dict(cls, data, *, checked=False):
     ``from_fitted_model`` with the stored parameters, then the stored fit information."""
     portable = restore_model(data) if checked else read_model(data)
     kind = data.get("model_type", REGRESSOR_TYPE)
-    if kind != cls._portable_type:
+    expected = cls.__skhmmgmr_model_type__
+    if kind != expected:
         raise ValueError(
-            f"the file holds a {kind} (its 'model_type'), not a {cls._portable_type}: read it "
+            f"the file holds a {kind} (its 'model_type'), not a {expected}: read it "
             "with skhmmgmr.portable.load"
         )
     try:

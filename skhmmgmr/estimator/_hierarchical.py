@@ -156,7 +156,7 @@ output_smoothing_
     }
 
     __metadata_request__fit = {"groups": True, "manoeuvre": True}
-    _portable_type = HIERARCHICAL_TYPE
+    __skhmmgmr_model_type__ = HIERARCHICAL_TYPE
 
     def __init__(
         self,
@@ -369,10 +369,10 @@ output_smoothing_
             setattr(estimator, attribute, value)
         return estimator
 
-    def _portable_params(self):
+    def __skhmmgmr_file_params__(self):
         """The parameters the model file keeps: the fitted manoeuvres' names and states
         (``manoeuvres`` and ``n_states`` as lists), so that loading restores the hierarchy."""
-        params = super()._portable_params()
+        params = super().__skhmmgmr_file_params__()
         params["manoeuvres"] = [_plain(name) for name in self.manoeuvres_]
         params["n_states"] = [int(size) for size in self.states_per_manoeuvre_]
         return params

@@ -7,8 +7,9 @@ portable JSON format to :mod:`skhmmgmr._hmm._portable` (the regressor's block of
 :class:`~skhmmgmr.FilterStream`. The model file is written and read by
 :func:`skhmmgmr.portable.save` and :func:`~skhmmgmr.portable.load`; the estimator's JSON
 methods (``to_dict``, ``from_dict``, ``export_json``, ``from_json``) are their deprecated
-aliases, kept for one release. The mixin's two hooks say what the file keeps of an estimator:
-its ``model_type`` (``_portable_type``) and its parameters (``_portable_params``).
+aliases, kept for one release. The mixin implements the model file's protocol (see
+:mod:`skhmmgmr._hmm._portable`): what the file keeps of an estimator, its ``model_type``
+(``__skhmmgmr_model_type__``) and its parameters (``__skhmmgmr_file_params__``).
 """
 
 import numpy as np
@@ -55,7 +56,7 @@ class ModelIOMixin:
     """Builds an estimator around a :class:`~skhmmgmr.FittedHMMGMR` and reads it out."""
 
     # ``model_type`` of the estimator's portable model file
-    _portable_type = REGRESSOR_TYPE
+    __skhmmgmr_model_type__ = REGRESSOR_TYPE
 
     @classmethod
     def from_fitted_model(cls, model, **params):
@@ -197,7 +198,7 @@ class ModelIOMixin:
         """
         return FilterStream(self, **kwargs)
 
-    def _portable_params(self):
+    def __skhmmgmr_file_params__(self):
         """The parameters the model file keeps (``estimator_params``)."""
         return self.get_params()
 
