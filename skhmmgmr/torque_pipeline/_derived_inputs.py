@@ -364,3 +364,35 @@ def source_positions(step):
             f"angle_column / load_columns); {where}."
         )
     return positions
+
+
+def stream_description(step):
+    """The plain description a fitted ``SteeringFeatures`` gives of itself for a stream (see
+    its ``stream_settings``)."""
+    positions = source_positions(step)
+    names = getattr(step, "feature_names_in_", None)
+    friction, radii, lead = step.friction_velocity_, step.friction_angle_, step.angle_lead_
+    slow = step.slow_velocity_filter_
+    filtered = friction is not None and step.velocity_filter_ is not None
+    if isinstance(friction, tuple):
+        friction = list(friction_widths(friction))
+    elif friction is not None:
+        friction = float(friction)
+    return {
+        "n_features_in": int(step.n_features_in_),
+        "feature_names_in": None if names is None else [str(name) for name in names],
+        "feature_names_out": [str(name) for name in step.get_feature_names_out()],
+        "friction_position": None if friction is None else positions[step.friction_column],
+        "friction_velocity": friction,
+        "filter_decay": (
+            filter_decay(step.sampling_period_, step.velocity_filter_) if filtered else None
+        ),
+        "sampling_period": None if step.sampling_period_ is None else float(step.sampling_period_),
+        "angle_position": None if radii is None else positions[step.angle_column],
+        "friction_angle": None if radii is None else [float(r) for r in radii],
+        "angle_lead": None if lead is None else float(lead),
+        "slow_filter_decay": (None if slow is None else filter_decay(step.sampling_period_, slow)),
+        "lead_position": None if lead is None else positions[step.friction_column],
+        "load_positions": [positions[column] for column in step.load_columns],
+        "powers": [int(power) for power in step.powers],
+    }

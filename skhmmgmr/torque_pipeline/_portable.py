@@ -11,11 +11,10 @@ Reading restores every step and checks that each one's outputs are the next one'
 import math
 import numbers
 
-import numpy as np
 from sklearn.pipeline import Pipeline
 from sklearn.utils.validation import check_is_fitted
 
-from .._core._compat import InvalidParameterError, validate_parameter_constraints
+from .._core._compat import InvalidParameterError
 from .._hmm._portable import (
     FORMAT_NAME,
     HIERARCHICAL_TYPE,
@@ -29,11 +28,9 @@ from .._hmm._portable import (
 )
 from .._version import __version__
 from ..estimator import HierarchicalHMMGMRRegressor, HMMGMRRegressor
-from ._derived_inputs import fitted_friction, fitted_lead, fitted_radii, fitted_slow
 from ._driver_model import DriverModel
-from ._friction_search import AUTO
 from ._pipeline import TorquePipeline
-from ._steering_features import LEARNED, SteeringFeatures
+from ._steering_features import SteeringFeatures, restore_steering_features
 
 #: The classes a model file holds, by their ``model_type``.
 MODEL_TYPES = {
@@ -275,9 +272,7 @@ def _steering_step(block, where):
         for key, value in block["params"].items()
     }
     try:
-        return _restored_steering_features(
-            values, block["n_features_in"], block["feature_names_in"]
-        )
+        return restore_steering_features(values, block["n_features_in"], block["feature_names_in"])
     except (InvalidParameterError, TypeError, ValueError) as exc:
         raise ValueError(f"'{where}' holds a SteeringFeatures that fit refuses: {exc}") from exc
 
@@ -297,38 +292,3 @@ def _check_chain(previous, step, where):
         raise ValueError(
             f"'{where}' takes the inputs {list(names)}, but the step before it gives {out}"
         )
-
-
-def _restored_steering_features(params, n_features_in, feature_names_in=None):
-    """A fitted :class:`SteeringFeatures` from its parameters and fitted facts (a step of the
-    portable model file), refused as ``fit`` would refuse them."""
-    step = SteeringFeatures(**params)
-    validate_parameter_constraints(
-        SteeringFeatures._parameter_constraints,
-        step.get_params(deep=False),
-        caller_name="SteeringFeatures",
-    )
-    step._check_parameters()
-    for name in LEARNED:
-        if isinstance(params.get(name), str) and params[name] == AUTO:
-            raise ValueError(
-                f"{name}='auto' is a setting to fit; a fitted step holds the chosen value."
-            )
-    for name in ("velocity_filter", "slow_velocity_filter"):
-        if getattr(step, name) is not None and step.sampling_period is None:
-            raise ValueError(
-                f"{name}={getattr(step, name)!r} needs sampling_period (the seconds between "
-                "two rows); got sampling_period=None."
-            )
-    step.friction_velocity_ = fitted_friction(step.friction_velocity)
-    step.friction_angle_ = fitted_radii(step.friction_angle)
-    step.angle_lead_ = fitted_lead(step.angle_lead, step.friction_angle_)
-    step.slow_velocity_filter_ = fitted_slow(step.slow_velocity_filter, step.friction_velocity)
-    step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
-    step.sampling_period_ = step.sampling_period
-    step.friction_search_ = None
-    step.n_features_in_ = n_features_in
-    if feature_names_in is not None:
-        step.feature_names_in_ = np.asarray(feature_names_in, dtype=object)
-    step._check_inputs()
-    return step

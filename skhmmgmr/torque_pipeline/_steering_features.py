@@ -17,7 +17,7 @@ import pandas as pd
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._core._compat import Interval, StrOptions, _fit_context
+from .._core._compat import Interval, StrOptions, _fit_context, validate_parameter_constraints
 from .._core._docstrings import fill_shared_parameters
 from .._core._panel import in_filter_order
 from .._core._pickled import PickleVersionMixin
@@ -27,19 +27,18 @@ from ._derived_inputs import (
     check_settings,
     derived_names,
     derived_units,
-    filter_decay,
     filtered_velocity,
     fitted_friction,
     fitted_lead,
     fitted_radii,
     fitted_slow,
     friction_inputs,
-    friction_widths,
     hysteresis_names,
     led_angle,
     load_inputs,
     recording_hysteresis,
     source_positions,
+    stream_description,
 )
 from ._friction_search import AUTO, RADIUS_GRID, WIDTH_GRID, candidate_table
 
@@ -264,12 +263,9 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         # one pickled before the hysteresis inputs existed had none
         state = {"friction_angle": None, "angle_column": "steering_wheel_angle", **state}
         state = {"angle_lead": None, "slow_velocity_filter": None, **state}
-        if "n_features_in_" in state and "friction_angle_" not in state:
-            state["friction_angle_"] = None
-        if "n_features_in_" in state and "angle_lead_" not in state:
-            state["angle_lead_"] = None
-        if "n_features_in_" in state and "slow_velocity_filter_" not in state:
-            state["slow_velocity_filter_"] = None
+        for name in ("friction_angle_", "angle_lead_", "slow_velocity_filter_"):
+            if "n_features_in_" in state and name not in state:
+                state[name] = None
         super().__setstate__(state)
 
     @_fit_context(prefer_skip_nested_validation=True)
@@ -546,37 +542,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         0.6065
         """
         check_is_fitted(self, "n_features_in_")
-        positions = source_positions(self)
-        names = getattr(self, "feature_names_in_", None)
-        friction, radii, lead = self.friction_velocity_, self.friction_angle_, self.angle_lead_
-        slow = self.slow_velocity_filter_
-        filtered = friction is not None and self.velocity_filter_ is not None
-        if isinstance(friction, tuple):
-            friction = list(friction_widths(friction))
-        elif friction is not None:
-            friction = float(friction)
-        return {
-            "n_features_in": int(self.n_features_in_),
-            "feature_names_in": None if names is None else [str(name) for name in names],
-            "feature_names_out": [str(name) for name in self.get_feature_names_out()],
-            "friction_position": None if friction is None else positions[self.friction_column],
-            "friction_velocity": friction,
-            "filter_decay": (
-                filter_decay(self.sampling_period_, self.velocity_filter_) if filtered else None
-            ),
-            "sampling_period": None
-            if self.sampling_period_ is None
-            else float(self.sampling_period_),
-            "angle_position": None if radii is None else positions[self.angle_column],
-            "friction_angle": None if radii is None else [float(r) for r in radii],
-            "angle_lead": None if lead is None else float(lead),
-            "slow_filter_decay": (
-                None if slow is None else filter_decay(self.sampling_period_, slow)
-            ),
-            "lead_position": None if lead is None else positions[self.friction_column],
-            "load_positions": [positions[column] for column in self.load_columns],
-            "powers": [int(power) for power in self.powers],
-        }
+        return stream_description(self)
 
     def _derived_names(self):
         """The derived inputs' names; before an ``"auto"`` choice, every name it may give."""
@@ -593,3 +559,38 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         tags.input_tags.allow_nan = True
         tags.requires_fit = True
         return tags
+
+
+def restore_steering_features(params, n_features_in, feature_names_in=None):
+    """A fitted :class:`SteeringFeatures` from its parameters and fitted facts (a step of the
+    portable model file), refused as ``fit`` would refuse them."""
+    step = SteeringFeatures(**params)
+    validate_parameter_constraints(
+        SteeringFeatures._parameter_constraints,
+        step.get_params(deep=False),
+        caller_name="SteeringFeatures",
+    )
+    step._check_parameters()
+    for name in LEARNED:
+        if isinstance(params.get(name), str) and params[name] == AUTO:
+            raise ValueError(
+                f"{name}='auto' is a setting to fit; a fitted step holds the chosen value."
+            )
+    for name in ("velocity_filter", "slow_velocity_filter"):
+        if getattr(step, name) is not None and step.sampling_period is None:
+            raise ValueError(
+                f"{name}={getattr(step, name)!r} needs sampling_period (the seconds between "
+                "two rows); got sampling_period=None."
+            )
+    step.friction_velocity_ = fitted_friction(step.friction_velocity)
+    step.friction_angle_ = fitted_radii(step.friction_angle)
+    step.angle_lead_ = fitted_lead(step.angle_lead, step.friction_angle_)
+    step.slow_velocity_filter_ = fitted_slow(step.slow_velocity_filter, step.friction_velocity)
+    step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
+    step.sampling_period_ = step.sampling_period
+    step.friction_search_ = None
+    step.n_features_in_ = n_features_in
+    if feature_names_in is not None:
+        step.feature_names_in_ = np.asarray(feature_names_in, dtype=object)
+    step._check_inputs()
+    return step
