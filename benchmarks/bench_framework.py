@@ -575,11 +575,11 @@ def main(argv=None):
         help="with --searches: read the full search of an earlier --save folder, not run it",
     )
     parser.add_argument(
-        "--near-tie",
+        "--screening-error",
         type=float,
         default=None,
-        help="the fast search fits in full the near-ties within this share (e.g. 0.005) of "
-        "what the wrappers' decisions read (default: off)",
+        help="the bound of a screened score's relative error (e.g. 0.0025) under which the "
+        "fast search fits in full what can change a relevance decision (default: off)",
     )
     parser.add_argument("--skip-reference", action="store_true")
     parser.add_argument("--skip-peer", action="store_true")
@@ -590,7 +590,7 @@ def main(argv=None):
         help="compare with the saved tables of an earlier reference run instead of running it",
     )
     args = parser.parse_args(argv)
-    _screening.NEAR_TIE = args.near_tie
+    _screening.SCREENING_ERROR = args.screening_error
     if args.scale:
         return run_scale(
             n_drivers=args.drivers,

@@ -42,14 +42,6 @@ def best_per_recording(scores, key, *, tie_breaker=None):
     )
 
 
-def near_best(scores, key, tolerance):
-    """The ``key`` of every model whose performance score is within ``tolerance`` (relative)
-    of the lowest on some (trade-off, recording): the best and its near-ties."""
-    best = scores.groupby(["trade_off", "recording"], sort=False)["performance_score"]
-    bound = best.transform("min") * (1.0 + tolerance)
-    return pd.unique(scores.loc[scores["performance_score"] <= bound, key])
-
-
 def best_on_average(scores, key, *, tie_breaker=None):
     """Model with the lowest mean performance score over recordings, per trade-off."""
     columns = [key, tie_breaker] if tie_breaker else [key]

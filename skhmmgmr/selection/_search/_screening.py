@@ -60,14 +60,18 @@ SEARCHES = ("fast", "full")
 SUBSET_ITERATIONS = 2
 #: EM iterations after every split of the state sweep's chain.
 STATE_ITERATIONS = 3
-#: When set (a share, e.g. 0.005), the wrappers fit in full every screened subset whose
-#: performance score is within this share of what a decision reads (a recording's best in the
-#: exhaustive wrapper, a path's best option in the forward one): the decisions are then read
-#: from full fits wherever the screening's error is below it. Off (``None``): at the thesis'
-#: scale it gave seed 0 the full search's answers at 0.005 but fitted a third of the subsets
-#: in full, and the fast search was no longer faster (``benchmarks/bench_framework.py
-#: --near-tie``, the selection page of the user guide).
-NEAR_TIE = None
+#: When set (a share, e.g. 0.01): the bound of the relative error of a screened model's terms
+#: (``|100 - accuracy|`` and the smoothness per validation recording, against the full
+#: search's fit of the same model) under which the wrappers confirm, fitted in full, only
+#: what can change a decision the framework reads (:mod:`._decisions`): in the exhaustive
+#: wrapper the possible best subsets of the (trade-off, recording) pairs that can swing a
+#: relevance count across a candidate threshold, and the possible best subsets on average; in
+#: the forward wrapper the single features (every score is divided by their sums) and every
+#: step of the paths that can swing such a count, retraced. Off (``None``): the decisions
+#: read screened scores. At the thesis' scale the bound settles few decisions for many full
+#: fits (``benchmarks/bench_framework.py --screening-error``, the selection page of the user
+#: guide).
+SCREENING_ERROR = None
 #: Screened models per task: the per-task cost (reading the fold, a worker's start) is
 #: spread over them, and the last tasks stay short.
 BATCH_SIZE = 8

@@ -19,11 +19,11 @@ from ..._core._compat import Interval, _fit_context
 from ..._core._docstrings import fill_shared_parameters
 from ...metrics._scores import trade_offs as all_trade_offs
 from .._search import _screening
+from .._search._decisions import count_thresholds, normalised_bounds, relevance_to_confirm
 from .._search._score_tables import (
     best_on_average,
     best_per_recording,
     labels_of,
-    near_best,
     rescore_table,
 )
 from .._search.base import RecordingSelector
@@ -142,13 +142,28 @@ class ExhaustiveFeatureSelector(RecordingSelector):
         ]
         trade_offs = [*all_trade_offs(10), *labels_of(self._trade_off)]
 
-        near_tie = _screening.NEAR_TIE
+        tolerance = _screening.SCREENING_ERROR
 
         def settle(table):
-            # the fast search fits in full every recording's best subset and its near-ties, at
-            # every trade-off of a 10 % grid: the per-recording winners relevance counts
+            # the fast search fits in full what can move a decision of the relevance (at
+            # every trade-off of a 10 % grid) or the best subset on average
             scores = rescore_table(table, "model", trade_offs)
-            return near_best(scores, "model", near_tie)
+            n_recordings = table["recording"].nunique()
+            chosen = relevance_to_confirm(
+                scores,
+                "model",
+                lambda model: subsets[model],
+                tolerance,
+                count_thresholds(n_recordings),
+            )
+            own = rescore_table(table, "model", self._trade_off)
+            low, high = normalised_bounds(own, tolerance)
+            means = own.assign(low=low, high=high).groupby("model", sort=False)
+            means = means.agg(
+                low=("low", "mean"), high=("high", "mean"), screened=("screened", "any")
+            )
+            best = means["low"] <= means["high"].min()
+            return chosen | set(means.index[best & means["screened"]])
 
         with self._searching(X, y, groups, splits):
             self.results_ = self._evaluate_subsets(
@@ -158,7 +173,7 @@ class ExhaustiveFeatureSelector(RecordingSelector):
                 splits,
                 subsets,
                 "feature subsets",
-                settle=None if near_tie is None else settle,
+                settle=None if tolerance is None else settle,
             )
         best = self.best_subsets(self._trade_off, per_recording=False)
         self.subset_ = best["subset"].iloc[0]

@@ -15,9 +15,15 @@ from ..._core._compat import Interval, StrOptions, _fit_context
 from ..._core._docstrings import fill_shared_parameters
 from ...metrics._table import parse_trade_offs
 from .._search import _screening
+from .._search._decisions import (
+    THESIS_SHARES,
+    count_thresholds,
+    possible_winners,
+    units_to_confirm,
+)
 from .._search._score_tables import labels_of
 from .._search.base import RecordingSelector
-from ._forward_paths import ForwardPath, FrozenScores, paths_table
+from ._forward_paths import ForwardPath, FrozenScores, paths_table, settled_prefix
 
 
 @fill_shared_parameters
@@ -159,23 +165,33 @@ class ForwardFeatureSelector(RecordingSelector):
                     exact.update(s for s, screened in pairs if not screened)
 
         def confirm(active):
-            # the fast search fits in full every path's best option and its near-ties, until
-            # the decisions read no screened score (near_tie: the screening's error)
+            # every step of a path being confirmed reads full fits: its possible best
+            # options (those a screened score within the bound could make the best)
             while True:
                 needed = set()
                 for path, score_of in active:
                     options = path.candidates()
                     values = [score_of(s) for s in options]
-                    bound = min(values) * (1.0 + near_tie)
-                    needed.update(s for s, v in zip(options, values, strict=True) if v <= bound)
+                    flags = [s in exact for s in options]
+                    possible = possible_winners(values, flags, tolerance)
+                    needed.update(s for s, p in zip(options, possible, strict=True) if p)
                 todo = sorted(needed - exact)
                 if not todo:
                     return
                 evaluate(todo, in_full=True)
 
+        def trace(entries, confirmed):
+            while any(path.active for path, _ in entries):
+                active = [(path, fn) for path, fn in entries if path.active]
+                evaluate([s for path, _ in active for s in path.candidates()])
+                if confirmed:
+                    confirm(active)
+                for path, score_of in active:
+                    path.step(score_of)
+
         with self._searching(X, y, groups, splits):
-            near_tie = _screening.NEAR_TIE
-            fast = getattr(self, "_fast_search", None) is not None and near_tie is not None
+            tolerance = _screening.SCREENING_ERROR
+            fast = getattr(self, "_fast_search", None) is not None and tolerance is not None
             singles = [(j,) for j in range(n_features)]
             evaluate(singles)
             if fast:  # the scales every score is divided by, from full fits
@@ -183,19 +199,21 @@ class ForwardFeatureSelector(RecordingSelector):
             scores.freeze(singles)
 
             path_ids = ["average"] if self.mode == "average" else list(range(len(recordings)))
-            paths = {}
-            for label in weights:
-                for path_id in path_ids:
-                    positions = slice(None) if path_id == "average" else [path_id]
-                    path = ForwardPath(n_features, tol=self.tol, max_features=max_features)
-                    paths[label, path_id] = (path, scores.scorer(*weights[label], positions))
-            while any(path.active for path, _ in paths.values()):
-                active = [(path, fn) for path, fn in paths.values() if path.active]
-                evaluate([s for path, _ in active for s in path.candidates()])
-                if fast:
-                    confirm(active)
-                for path, score_of in active:
-                    path.step(score_of)
+
+            def new_path(label, path_id):
+                positions = slice(None) if path_id == "average" else [path_id]
+                path = ForwardPath(n_features, tol=self.tol, max_features=max_features)
+                return path, scores.scorer(*weights[label], positions)
+
+            paths = {(label, i): new_path(label, i) for label in weights for i in path_ids}
+            trace(list(paths.values()), confirmed=False)
+            while fast:  # retrace, confirmed, the paths that can move a relevance decision
+                chosen = self._paths_to_confirm(paths, own[0], exact, tolerance)
+                if not chosen:
+                    break
+                for key in chosen:
+                    paths[key] = new_path(*key)
+                trace([paths[key] for key in chosen], confirmed=True)
 
         names = self._names()
         self.paths_ = paths_table(
@@ -209,6 +227,30 @@ class ForwardFeatureSelector(RecordingSelector):
         self.subset_ = self._chosen_subset(own[0])
         self.support_ = np.isin(names, self.subset_)
         return self
+
+    def _paths_to_confirm(self, paths, own_label, exact, tolerance):
+        """The paths to retrace with every step confirmed, so that each trade-off's
+        relevance decisions (:mod:`.._search._decisions`; at the selector's own trade-off
+        also the per-recording mode's half of the paths) are settled by the bound."""
+        n_features = self.n_features_in_
+        chosen = set()
+        for label in dict.fromkeys(label for label, _ in paths):
+            keys = [key for key in paths if key[0] == label]
+            shape = (len(keys), n_features)
+            always, ever = np.zeros(shape, dtype=bool), np.zeros(shape, dtype=bool)
+            point = np.zeros(shape, dtype=bool)
+            for u, key in enumerate(keys):
+                path, score_of = paths[key]
+                settled, certain = settled_prefix(path, score_of, exact, tolerance)
+                point[u, list(path.selected)] = True
+                always[u, list(settled)] = True
+                ever[u] = point[u] if certain else True
+            shares = tuple(THESIS_SHARES.values())
+            if label == own_label and self.mode == "per_recording":
+                shares = (*shares, 0.5)
+            units = units_to_confirm(always, ever, point, count_thresholds(len(keys), shares))
+            chosen.update(keys[u] for u in units)
+        return chosen
 
     def best_subsets(self, trade_off=None):
         """Final subset of every path traced for the trade-off(s).

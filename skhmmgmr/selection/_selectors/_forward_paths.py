@@ -4,6 +4,7 @@ reads from a frozen table of evaluated subsets."""
 import numpy as np
 import pandas as pd
 
+from .._search._decisions import possible_winners, score_bounds
 from .._search._score_tables import relative_gain
 
 
@@ -50,6 +51,41 @@ class ForwardPath:
             self.score = best_score
         done = len(self.selected) >= min(self.max_features, self.n_candidates)
         self.active = accepted and not done
+
+
+def settled_prefix(path, score_of, exact, tolerance):
+    """``(features, settled)``: the features a traced ``path`` selected before its first
+    decision that the bound leaves open, and whether it left none open.
+
+    A step's decision is open when a screened option's score within ``tolerance``
+    (relative; the subsets in ``exact`` are exact) could make another option the best, or
+    move the best's gain across the path's ``tol``, or when the path took another option
+    than the scores now known make the best (it was traced before some were confirmed).
+    The path only adds features, so those selected before an open decision are in its
+    final subset whatever the decision.
+    """
+    selected, previous = (), None  # the subset held, and its score's bounds
+    for entry in path.history:
+        options = [
+            tuple(sorted((*selected, j))) for j in range(path.n_candidates) if j not in selected
+        ]
+        values = np.array([score_of(s) for s in options])
+        flags = np.array([s in exact for s in options])
+        possible = possible_winners(values, flags, tolerance)
+        best = int(np.argmin(values))
+        if possible.sum() > 1 and not flags[possible].all():
+            return selected, False
+        if options[best] != entry["subset"]:  # traced on scores confirmed since
+            return selected, False
+        low, high = score_bounds(values[best], flags[best], tolerance)
+        if previous is not None:
+            gains = relative_gain(previous[0], high), relative_gain(previous[1], low)
+            if min(gains) <= path.tol < max(gains):
+                return selected, False
+        if not entry["accepted"]:
+            break
+        selected, previous = entry["subset"], (low, high)
+    return selected, True
 
 
 class FrozenScores:
