@@ -116,6 +116,9 @@ def describe(features, readout, period):
             friction += f" led {lead * 1000:g} ms"
     tau = features.velocity_filter_
     velocity = "no filter" if tau is None else f"filter {tau * 1000:g} ms"
+    slow = getattr(features, "slow_velocity_filter_", None)
+    if slow is not None:
+        velocity += f", slow velocity {slow * 1000:g} ms"
     return f"{friction}, {velocity}, read-out {readout * period * 1000:.1f} ms"
 
 

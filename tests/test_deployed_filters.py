@@ -52,10 +52,16 @@ def drives(request):
 
 def _models(rate, train):
     X, y, groups = train[COLUMNS], train["driver_torque"], train["recording"]
-    # the plays read the angle itself, as when these recordings were found to reach below
-    # the old threshold (a lead, tested in test_derived_inputs.py, moves their densities)
+    # the plays read the angle itself and no slow velocity, as when these recordings were
+    # found to reach below the old threshold (a lead or a slow velocity, tested in
+    # test_derived_inputs.py, moves their densities)
     pipeline = make_torque_pipeline(
-        5, sampling_period=1.0 / rate, n_iter=20, random_state=0, angle_lead=None
+        5,
+        sampling_period=1.0 / rate,
+        n_iter=20,
+        random_state=0,
+        angle_lead=None,
+        slow_velocity_filter=None,
     )
     regressor = HMMGMRRegressor(n_states=5, n_iter=20, random_state=0)
     return {

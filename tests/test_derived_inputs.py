@@ -17,13 +17,19 @@ from test_pipeline_stream import _plain_play
 
 from skhmmgmr import SteeringFeatures, make_torque_pipeline, portable
 from skhmmgmr.datasets import FEATURE_NAMES, make_lane_keeping, to_panel
-from skhmmgmr.torque_pipeline import FILTER_CANDIDATES, WIDTH_GRID, low_pass
+from skhmmgmr.torque_pipeline import (
+    FILTER_CANDIDATES,
+    SLOW_FILTER_CANDIDATES,
+    WIDTH_GRID,
+    low_pass,
+)
 from skhmmgmr.torque_pipeline._friction_search import LADDER_QUANTILES, velocity_ladder
 
 COLUMNS = ["steering_wheel_angle", "steering_wheel_velocity", "lateral_acceleration"]
 PERIOD = 0.01
 BAND = 0.05  # the friction band of the data
 LEAD = 0.02  # the lead of the plays of the pipeline fixture [s]
+SLOW = 0.1  # the slow velocity filter of the pipeline fixture [s]
 
 
 def _recordings(
@@ -34,12 +40,14 @@ def _recordings(
     seed=0,
     plays=(),
     angle_noise=1e-3,
+    lag=None,
 ):
     """Smooth steering with a friction torque ``sum(h * tanh(v / w))`` over the ``(h, w)`` of
     ``friction`` and a hysteresis torque ``sum(h * play_r(angle))`` over the ``(h, r)`` of
     ``plays``, the velocity measured with white noise of std ``noise``, the angle with
     ``angle_noise``: the torque reads the true velocity and angle, the inputs the measured
-    ones."""
+    ones. With ``lag`` [s], the friction reads the true velocity through a first-order filter
+    of that time constant (a column whose friction lags the wheel)."""
     rng = np.random.default_rng(seed)
     frames = []
     t = np.arange(0.0, seconds, PERIOD)
@@ -56,7 +64,8 @@ def _recordings(
             for a, f, p in zip(amplitudes, frequencies, phases, strict=True)
         )
         torque = 8.0 * angle + rng.normal(0, 0.01, len(t))
-        torque += sum(height * np.tanh(velocity / width) for height, width in friction)
+        slowed = velocity if lag is None else low_pass(velocity, math.exp(-PERIOD / lag))
+        torque += sum(height * np.tanh(slowed / width) for height, width in friction)
         torque += sum(height * _plain_play(angle, radius) for height, radius in plays)
         frames.append(
             pd.DataFrame(
@@ -399,16 +408,22 @@ def test_the_choice_is_deterministic_and_ignores_the_row_order_in_the_pipeline(d
 
 @pytest.fixture(scope="module")
 def pipeline(data):
-    """The torque pipeline with its defaults, the plays led on the velocity: the friction
-    basis and the filter chosen in fit."""
+    """The torque pipeline with its defaults, the plays led on the velocity and a slow
+    velocity: the friction basis and the filter chosen in fit."""
     model = make_torque_pipeline(
-        3, sampling_period=PERIOD, n_iter=10, random_state=0, angle_lead=LEAD
+        3,
+        sampling_period=PERIOD,
+        n_iter=10,
+        random_state=0,
+        angle_lead=LEAD,
+        slow_velocity_filter=SLOW,
     )
     model.fit(data[COLUMNS], data["driver_torque"], groups=data["recording"])
     assert model[0].velocity_filter_ is not None  # the stream must follow a chosen filter
     assert len(model[0].friction_velocity_) >= 2  # a basis
     assert model[0].friction_angle_ is not None  # and plays
     assert model[0].angle_lead_ == LEAD  # led on the velocity
+    assert model[0].slow_velocity_filter_ == SLOW  # and the friction basis of a slow velocity
     return model
 
 
@@ -419,6 +434,7 @@ def test_the_stream_follows_the_chosen_settings(pipeline, data):
     assert settings["friction_angle"] == list(pipeline[0].friction_angle_)
     assert (settings["angle_lead"], settings["lead_position"]) == (LEAD, 1)
     assert settings["filter_decay"] == math.exp(-PERIOD / pipeline[0].velocity_filter_)
+    assert settings["slow_filter_decay"] == math.exp(-PERIOD / SLOW)
     stream = pipeline.filter_stream()
     estimates = []
     for recording in pd.unique(groups):
@@ -437,6 +453,7 @@ def test_the_model_file_holds_the_chosen_values(pipeline, data, tmp_path):
     assert params["friction_angle"] == list(pipeline[0].friction_angle_)
     assert params["angle_column"] == "steering_wheel_angle"
     assert params["angle_lead"] == LEAD
+    assert params["slow_velocity_filter"] == SLOW
     assert params["velocity_filter"] == pipeline[0].velocity_filter_
     # a basis needs no new format version (older readers refuse it, never misread it)
     assert document["format_version"] == document["steps"][-1]["model"]["format_version"]
@@ -444,6 +461,7 @@ def test_the_model_file_holds_the_chosen_values(pipeline, data, tmp_path):
     assert restored[0].friction_velocity_ == pipeline[0].friction_velocity_
     assert restored[0].friction_angle_ == pipeline[0].friction_angle_
     assert restored[0].angle_lead_ == LEAD
+    assert restored[0].slow_velocity_filter_ == SLOW
     X, groups = data[COLUMNS], data["recording"]
     np.testing.assert_array_equal(
         restored.predict(X, groups=groups), pipeline.predict(X, groups=groups)
@@ -468,6 +486,8 @@ def test_the_model_file_holds_the_chosen_values(pipeline, data, tmp_path):
         (angle, [0.004, 0.0], "'steps[0].params.friction_angle[1]' must be greater than 0"),
         (angle, [0.004, 0.0040001], "friction_angle=(0.004, 0.0040001) repeats a width"),
         ("angle_lead", "auto", "'steps[0].params.angle_lead' must be a number"),
+        ("slow_velocity_filter", "auto", "'steps[0].params.slow_velocity_filter' must be a"),
+        ("slow_velocity_filter", 0.0, "'steps[0].params.slow_velocity_filter' must be greater"),
     ]:
         bad = json.loads(json.dumps(document))
         bad["steps"][0]["params"][key] = value
@@ -512,6 +532,7 @@ def test_the_c_filter_follows_the_chosen_settings(pipeline, data, tmp_path):
     scale = pipeline[-1].model_.standardization.output_scale
     compiled = Compiled(pipeline, tmp_path, name="auto")
     assert "friction_widths" in compiled.paths[1].read_text()
+    assert "slow_low_pass(state, inputs[1])" in compiled.paths[1].read_text()
     estimates, _, codes = compiled.run(X, groups)
     assert not codes.any()
     np.testing.assert_allclose(estimates[:, 0], expected, rtol=0, atol=1e-12)
@@ -535,13 +556,16 @@ def test_the_command_line_chooses_and_reports_the_settings(data, tmp_path, capsy
     argv = ["fit", str(csv), "--target", "driver_torque", "--features", *COLUMNS]
     argv += ["--n-states", "2", "--pipeline", "torque", "--output", str(model)]
     argv += ["--friction-velocity", "auto", "--velocity-filter", "auto"]
-    assert main(argv) == 0
+    assert main([*argv, "--slow-velocity-filter", str(SLOW)]) == 0
     fitted = portable.load(model)
     widths, time_constant = fitted[0].friction_velocity, fitted[0].velocity_filter
     assert set(widths) <= set(WIDTH_GRID) and time_constant in FILTER_CANDIDATES
     assert fitted[0].sampling_period == pytest.approx(2 * PERIOD)
+    assert fitted[0].slow_velocity_filter_ == SLOW
     listed = ", ".join(f"{w:g}" for w in widths)
-    assert f"friction_velocity {listed}, velocity_filter" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert f"friction_velocity {listed}, velocity_filter" in out
+    assert f"slow_velocity_filter {SLOW:g}" in out
 
 
 def test_the_recordings_reach_the_choice_by_every_path(data):
@@ -575,7 +599,12 @@ def test_the_sampling_period_is_read_from_a_panels_time_index(data):
     considered = set(pipe[0].friction_search_["velocity_filter"])
     assert considered == set(FILTER_CANDIDATES)
     # the same choice as with the period given, and a fixed filter needs no more
-    given = _auto(sampling_period=PERIOD, friction_angle="auto", angle_lead="auto").fit(X, y)
+    given = _auto(
+        sampling_period=PERIOD,
+        friction_angle="auto",
+        angle_lead="auto",
+        slow_velocity_filter="auto",
+    ).fit(X, y)
     pd.testing.assert_frame_equal(pipe[0].friction_search_, given.friction_search_)
     fixed = SteeringFeatures(velocity_filter=0.02).fit(X)
     assert fixed.sampling_period_ == pytest.approx(PERIOD, rel=1e-12)
@@ -672,7 +701,14 @@ def test_auto_leads_an_angle_sensor_that_is_late(late_rows, lead):
 
 
 @pytest.mark.parametrize(
-    "name", ["friction_velocity", "velocity_filter", "sampling_period", "angle_lead"]
+    "name",
+    [
+        "friction_velocity",
+        "velocity_filter",
+        "sampling_period",
+        "angle_lead",
+        "slow_velocity_filter",
+    ],
 )
 def test_an_infinite_setting_is_refused(data, name):
     """Refused naming the parameter: by its constraint where scikit-learn's intervals exclude
@@ -680,3 +716,61 @@ def test_an_infinite_setting_is_refused(data, name):
     params = {"friction_angle": 0.004, "sampling_period": PERIOD, name: math.inf}
     with pytest.raises(ValueError, match=f"{name}' parameter .* Got inf|{name} must be finite"):
         SteeringFeatures(**params).fit(data[COLUMNS])
+
+
+def _plain_low_pass(values, decay):
+    """The first-order filter by a plain loop: started at the first observed value, ``y =
+    decay y + (1 - decay) x``; after ``g`` missing values ``decay^(g + 1)`` in place of
+    ``decay``; NaN where the value is missing."""
+    out, last, lapse = [], None, decay
+    for x in values:
+        if math.isnan(x):
+            out.append(math.nan)
+            lapse *= decay
+            continue
+        last = x if last is None else lapse * last + (1.0 - lapse) * x
+        out.append(last)
+        lapse = decay
+    return np.array(out)
+
+
+def test_the_slow_velocity_is_a_plain_loops_first_order_filter():
+    """``slow_velocity_filter``: the friction inputs of the velocity through its own filter,
+    restarted at each recording, after the unchanged friction inputs of the measured one."""
+    data = _recordings(n_recordings=2, seconds=2.0)
+    data.loc[[5, 6, 250], "steering_wheel_velocity"] = np.nan
+    widths, groups = (0.01, 0.05), data["recording"]
+    plain = SteeringFeatures(friction_velocity=widths, load_columns=(), sampling_period=PERIOD)
+    step = plain.set_params(slow_velocity_filter=SLOW)
+    derived = step.fit_transform(data[COLUMNS], groups=groups)
+    fast = ["steering_friction_0.01", "steering_friction_0.05"]
+    slow = ["steering_friction_slow_0.01", "steering_friction_slow_0.05"]
+    assert list(derived.columns[3:]) == fast + slow
+    unslowed = SteeringFeatures(friction_velocity=widths, load_columns=()).fit_transform(
+        data[COLUMNS], groups=groups
+    )
+    pd.testing.assert_frame_equal(derived[fast], unslowed[fast])
+    for recording in pd.unique(groups):
+        rows = (groups == recording).to_numpy()
+        velocity = data.loc[rows, "steering_wheel_velocity"].to_numpy()
+        slowed = _plain_low_pass(velocity, math.exp(-PERIOD / SLOW))
+        for name, width in zip(slow, widths, strict=True):
+            expected = np.tanh(slowed / width)
+            np.testing.assert_allclose(derived.loc[rows, name], expected, rtol=1e-12, atol=1e-15)
+    assert np.isnan(derived.loc[[5, 6, 250], slow]).all().all()
+    with pytest.raises(ValueError, match="slow_velocity_filter=0.1 needs sampling_period"):
+        step.set_params(sampling_period=None).fit(data[COLUMNS])
+    with pytest.raises(ValueError, match="'slow_velocity_filter' parameter"):
+        step.set_params(slow_velocity_filter=-0.1).fit(data[COLUMNS])
+
+
+@pytest.mark.parametrize("lag", [None, 0.1, 0.2])
+def test_auto_slows_the_velocity_of_a_friction_that_lags(lag):
+    """The friction torque reads the true velocity through a filter of ``lag`` seconds:
+    ``"auto"`` takes the slow velocity of that time constant, and none when the friction reads
+    the velocity itself (measured with little noise: no filter needed to see it)."""
+    data = _recordings(noise=0.001, lag=lag, n_recordings=3, seconds=10.0)
+    step = _auto(sampling_period=PERIOD, slow_velocity_filter="auto")
+    step.fit(data[COLUMNS], data["driver_torque"], groups=data["recording"])
+    assert step.slow_velocity_filter_ == lag
+    assert set(step.friction_search_["slow_velocity_filter"]) == set(SLOW_FILTER_CANDIDATES)

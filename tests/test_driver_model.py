@@ -98,8 +98,10 @@ def test_the_penalty_is_the_least_squares_fit_of_the_shifted_target(train):
 
 def test_without_perturbation_or_penalty_it_is_the_torque_pipeline(train):
     settings = dict(n_states=2, sampling_period=1 / RATE, random_state=0, powers=(2,))
-    # the driver model keeps no plays on the angle (it was measured at the wheel without them)
-    pipeline = _fit(make_torque_pipeline(**settings, friction_angle=None), train)
+    # the driver model keeps no plays on the angle and no slow velocity (it was measured at the
+    # wheel without them)
+    pipeline = make_torque_pipeline(**settings, friction_angle=None, slow_velocity_filter=None)
+    pipeline = _fit(pipeline, train)
     expected = pipeline.predict(train[FEATURES], groups=train["recording"])
     for penalty, perturbation in [
         (1.0, None),

@@ -278,7 +278,9 @@ def test_the_pipelines_derived_inputs_and_velocity_filter(pipeline, protocol):
     features = model[0]
     # the C filter's plays are tested here too
     assert features.friction_angle_ is not None and features.friction_velocity_ is not None
-    n_friction = len(features.friction_velocity_) + len(features.friction_angle_)
+    # the friction basis of the velocity (and of the slow velocity, when chosen) and the plays
+    slowed = 1 + (features.slow_velocity_filter_ is not None)
+    n_friction = slowed * len(features.friction_velocity_) + len(features.friction_angle_)
     assert model[-1].n_features_in_ == len(FEATURE_NAMES) + n_friction + 4
     X, groups = protocol[list(FEATURE_NAMES)], protocol["recording"]
     expected = _compiled_is_predict(model, compiled, X, groups)

@@ -86,7 +86,13 @@ def test_a_pipeline_round_trip_predicts_bit_for_bit(
     # the file holds the values fit chose in place of "auto"
     chosen = {
         f"{pipe.steps[0][0]}__{name}": getattr(pipe[0], f"{name}_")
-        for name in ("friction_velocity", "velocity_filter", "friction_angle", "angle_lead")
+        for name in (
+            "friction_velocity",
+            "velocity_filter",
+            "friction_angle",
+            "angle_lead",
+            "slow_velocity_filter",
+        )
     }
     for key, value in pipe.get_params(deep=True).items():
         if key not in ("steps",) and not hasattr(value, "get_params"):

@@ -335,6 +335,7 @@ def test_recordings_reach_the_filter_through_routing(recordings):
         "velocity_filter": 0.1,
         "sampling_period": 0.05,
         "friction_angle": None,
+        "slow_velocity_filter": None,
         "n_iter": 5,
         "random_state": 0,
     }

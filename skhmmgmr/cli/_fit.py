@@ -72,6 +72,9 @@ TORQUE_OPTIONS = {
     "angle_lead": "time [s] by which the plays read the angle ahead on the velocity, angle + "
     "lead * velocity ('auto': none, 0.02 or 0.05 s chosen on the training recordings; 'none': "
     "the angle itself)",
+    "slow_velocity_filter": "time constant [s] of a second, slow low-pass filter on the "
+    "velocity, whose friction inputs follow the others ('auto': none, 0.1 or 0.2 s chosen on "
+    "the training recordings, given the sampling period; 'none': no such inputs)",
     "load_columns": "columns whose signed powers are appended (the option alone: none)",
     "powers": "powers >= 2 appended for every load column",
     "velocity_filter": "time constant [s] of a causal low-pass filter on the velocity before "
@@ -124,11 +127,12 @@ def _model_to_fit(args, period):
     options.update(given)
     for name in ("load_columns", "powers"):
         options[name] = tuple(options[name])
-    if options["velocity_filter"] not in (None, "auto") and period is None:
-        raise CommandError(
-            f"--velocity-filter needs the sampling period: give --sampling-period, or a time "
-            f"column (--time, now {args.time!r})"
-        )
+    for name in ("velocity_filter", "slow_velocity_filter"):
+        if options[name] not in (None, "auto") and period is None:
+            raise CommandError(
+                f"{option_name(name)} needs the sampling period: give --sampling-period, or a "
+                f"time column (--time, now {args.time!r})"
+            )
     columns = {name: options.pop(name) for name in ("friction_column", "angle_column")}
     pipe = make_torque_pipeline(args.n_states, sampling_period=period, **options, **common)
     pipe.set_params(**{f"steering_features__{name}": value for name, value in columns.items()})
@@ -166,7 +170,8 @@ def command_fit(args):
             widths = friction if isinstance(friction, tuple) else (friction,)
             derived += (
                 f" (friction_velocity {', '.join(f'{w:g}' for w in widths)}, velocity_filter "
-                f"{model[0].velocity_filter_ or 'none'})"
+                f"{model[0].velocity_filter_ or 'none'}, slow_velocity_filter "
+                f"{model[0].slow_velocity_filter_ or 'none'})"
             )
         radii = model[0].friction_angle_
         if radii is not None:
@@ -205,6 +210,9 @@ def _add_torque_options(parser):
         "load_columns": dict(nargs="*"),
         "powers": dict(nargs="*", type=int),
         "velocity_filter": dict(type=checked_by(setting, SteeringFeatures, "velocity_filter")),
+        "slow_velocity_filter": dict(
+            type=checked_by(setting, SteeringFeatures, "slow_velocity_filter")
+        ),
         "output_smoothing": dict(type=checked_by(setting, HMMGMRRegressor, "output_smoothing")),
     }
     for name, kind in kinds.items():

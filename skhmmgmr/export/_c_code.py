@@ -5,7 +5,8 @@ Every number and every operation is of the filter's arithmetic (``double``, or `
 ``dtype="float32"``: ``float`` literals and ``expf``, ``tanhf``, ``powf``, ``fabsf``, so that no
 value is promoted to ``double`` on the way); the friction inputs are ``tanh(v /
 friction_velocity)`` for one band, ``tanh(v / friction_widths[j])`` for every width of a
-basis, the velocity (filtered or not) read once; the hysteresis inputs are ``(a - p_j) /
+basis, the velocity (filtered or not) read once, then the same of the slow velocity (its own
+filter, ``slow_low_pass``) when there is one; the hysteresis inputs are ``(a - p_j) /
 friction_radii[j]`` of the plays on the angle ``a`` (their positions in the state; with a
 lead, ``a`` is the angle plus ``angle_lead`` times the unfiltered velocity); a signed power
 ``sign(x) |x|^p`` is a chain of multiplications in single precision up to
@@ -68,6 +69,9 @@ def _named_parameters(spec):
     if derived.velocity_decay is not None:
         constants.append(("velocity_decay", derived.velocity_decay))
         constants.append(("velocity_gain", 1.0 - derived.velocity_decay))
+    if derived.slow_decay is not None:
+        constants.append(("slow_velocity_decay", derived.slow_decay))
+        constants.append(("slow_velocity_gain", 1.0 - derived.slow_decay))
     if spec.min_log_density is not None:
         constants.append(("min_log_density", spec.min_log_density))
     return parts, constants
@@ -110,8 +114,13 @@ def derived_code(spec, dtype):
         if derived.velocity_decay is not None:
             velocity = f"low_pass(state, {velocity})"
         widths = derived.friction[1]
+        slow = None
+        if derived.slow_decay is not None:  # the slow filter's friction inputs follow
+            slow = f"slow_low_pass(state, inputs[{derived.friction[0]}])"
         if len(widths) == 1:
             lines.append(f"    x[{column}] = {tanh}({velocity} / friction_velocity);")
+            if slow is not None:
+                lines.append(f"    x[{column + 1}] = {tanh}({slow} / friction_velocity);")
         else:  # a basis: the velocity read once (the filter steps once), every width
             real = TYPES[dtype]["real"]
             lines.append(f"    {{\n        const {real} velocity = {velocity};")
@@ -119,8 +128,15 @@ def derived_code(spec, dtype):
                 f"        x[{column + j}] = {tanh}(velocity / friction_widths[{j}]);"
                 for j in range(len(widths))
             ]
+            if slow is not None:
+                lines.append(f"        const {real} slow = {slow};")
+                first = column + len(widths)
+                lines += [
+                    f"        x[{first + j}] = {tanh}(slow / friction_widths[{j}]);"
+                    for j in range(len(widths))
+                ]
             lines.append("    }")
-        column += len(widths)
+        column += len(widths) * (1 if slow is None else 2)
     if derived.hysteresis is not None:
         angle = f"inputs[{derived.hysteresis[0]}]"
         if derived.angle_lead is not None:
@@ -137,26 +153,26 @@ def derived_code(spec, dtype):
 _LOW_PASS = """
 /* The velocity through the first-order low-pass filter of SteeringFeatures (low_pass): the
  * first finite value is taken as it is, the next after g non-finite ones over g + 1 periods. */
-static @REAL@ low_pass(@NAME@_state *state, @REAL@ velocity)
+static @REAL@ @F@low_pass(@NAME@_state *state, @REAL@ velocity)
 {
     @REAL@ lapse;
     if (!isfinite(velocity)) {
-        if (state->velocity_since > @ZERO@) {
-            state->velocity_since += @ONE@;
+        if (state->@F@velocity_since > @ZERO@) {
+            state->@F@velocity_since += @ONE@;
         }
         return velocity;
     }
-    if (state->velocity_since == @ZERO@) {
-        state->velocity = velocity_gain * velocity + velocity_decay * velocity;
-    } else if (state->velocity_since == @ONE@) {
-        state->velocity = velocity_gain * velocity + velocity_decay * state->velocity;
+    if (state->@F@velocity_since == @ZERO@) {
+        state->@F@velocity = @F@velocity_gain * velocity + @F@velocity_decay * velocity;
+    } else if (state->@F@velocity_since == @ONE@) {
+        state->@F@velocity = @F@velocity_gain * velocity + @F@velocity_decay * state->@F@velocity;
     } else {
-        lapse = @POW@(velocity_decay, state->velocity_since);
-        state->velocity = velocity_gain * velocity
-                          + (lapse * state->velocity + (velocity_decay - lapse) * velocity);
+        lapse = @POW@(@F@velocity_decay, state->@F@velocity_since);
+        state->@F@velocity = @F@velocity_gain * velocity
+                          + (lapse * state->@F@velocity + (@F@velocity_decay - lapse) * velocity);
     }
-    state->velocity_since = @ONE@;
-    return state->velocity;
+    state->@F@velocity_since = @ONE@;
+    return state->@F@velocity;
 }
 """
 
@@ -199,7 +215,7 @@ static @REAL@ signum(@REAL@ value)
 
 
 def helpers(spec, name, dtype):
-    """The static functions the derived inputs need: the velocity filter, the plays and the
+    """The static functions the derived inputs need: the velocity filters, the plays and the
     sign."""
     types = TYPES[dtype]
     hysteresis = spec.derived.hysteresis
@@ -213,7 +229,9 @@ def helpers(spec, name, dtype):
     }
     text = ""
     if spec.derived.velocity_decay is not None:
-        text += _LOW_PASS
+        text += _LOW_PASS.replace("@F@", "")
+    if spec.derived.slow_decay is not None:  # the slow velocity: its own filter and state
+        text += _LOW_PASS.replace("@F@", "slow_")
     if hysteresis is not None:
         text += _PLAY
     if spec.derived.powers:

@@ -33,6 +33,11 @@ def header(spec, name, dtype):
             f"    {real} velocity;       /* low-pass filtered velocity (friction input) */\n"
             f"    {real} velocity_since; /* samples since its last finite value; 0: none yet */\n"
         )
+    if spec.derived.slow_decay is not None:
+        velocity += (
+            f"    {real} slow_velocity;       /* the slow filter's velocity (friction inputs) */\n"
+            f"    {real} slow_velocity_since; /* samples since its last finite value */\n"
+        )
     if spec.derived.hysteresis is not None:
         n_plays = len(spec.derived.hysteresis[1])
         velocity += (

@@ -92,6 +92,10 @@ def source(spec, name, dtype):
     velocity_reset = ""
     if spec.derived.velocity_decay is not None:
         velocity_reset = f"    state->velocity = {zero};\n    state->velocity_since = {zero};\n"
+    if spec.derived.slow_decay is not None:
+        velocity_reset += (
+            f"    state->slow_velocity = {zero};\n    state->slow_velocity_since = {zero};\n"
+        )
     if spec.derived.hysteresis is not None:
         velocity_reset += "    state->play_started = 0;\n"
     gather, source_of_z = _gather(spec, dtype)

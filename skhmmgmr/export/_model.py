@@ -46,7 +46,9 @@ class DerivedInputs:
     power in the transformer's column order; ``velocity_decay``: the decay of the velocity's
     low-pass filter per sample, or None; ``hysteresis``: ``(position, radii)`` of the angle
     and the plays' half-widths, or None; ``angle_lead``: ``(position, lead)`` of the velocity
-    and the time the plays read the angle ahead on it, or None (the angle itself).
+    and the time the plays read the angle ahead on it, or None (the angle itself);
+    ``slow_decay``: the decay per sample of the slow filter on the (unfiltered) velocity whose
+    friction inputs, of the same widths, follow the others, or None (no such inputs).
     """
 
     friction: tuple = None
@@ -54,12 +56,14 @@ class DerivedInputs:
     velocity_decay: float = None
     hysteresis: tuple = None
     angle_lead: tuple = None
+    slow_decay: float = None
 
     @property
     def n_derived(self):
         widths = () if self.friction is None else self.friction[1]
         radii = () if self.hysteresis is None else self.hysteresis[1]
-        return len(widths) + len(radii) + len(self.powers)
+        slow = () if self.slow_decay is None else widths
+        return len(widths) + len(slow) + len(radii) + len(self.powers)
 
 
 @dataclass(frozen=True)
@@ -193,12 +197,15 @@ def _derived_inputs(features, regressor):
     decay = None
     if features.friction_velocity_ is not None and features.velocity_filter_ is not None:
         decay = math.exp(-features.sampling_period_ / features.velocity_filter_)
+    slow = getattr(features, "slow_velocity_filter_", None)
+    if features.friction_velocity_ is not None and slow is not None:
+        slow = math.exp(-features.sampling_period_ / slow)
     hysteresis = None
     if features.friction_angle_ is not None:
         hysteresis = (positions[features.angle_column], tuple(features.friction_angle_))
     if lead is not None:
         lead = (positions[features.friction_column], float(lead))
-    derived = DerivedInputs(friction, powers, decay, hysteresis, lead)
+    derived = DerivedInputs(friction, powers, decay, hysteresis, lead, slow)
     expected = list(features.get_feature_names_out())
     given = getattr(regressor, "feature_names_in_", None)
     if n_raw + derived.n_derived != regressor.n_features_in_ or (

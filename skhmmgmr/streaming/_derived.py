@@ -14,12 +14,14 @@ None), ``angle_position`` (int or None: no hysteresis input), ``friction_angle``
 floats: the plays' half-widths), ``load_positions`` (list of int) and ``powers`` (list of
 int); optionally ``angle_lead`` (float or None) and ``lead_position`` (int or None): the plays
 read ``angle + angle_lead * velocity``, the velocity at ``lead_position`` (a description
-without them has no lead).
+without them has no lead); optionally ``slow_filter_decay`` (float or None): the factor per row
+of a second, slow filter on the (unfiltered) velocity, whose friction inputs, of the same
+widths, follow the others (a description without it has none).
 
 Every step appends its derived inputs to its input row, so the row the regressor reads is the
 sensed row followed by every step's derived inputs. An update reads the sensed row as a Python
 list once and computes the derived inputs with scalar operations (a handful per input); the
-only state is the velocity filter's and the plays' positions, restarted at every recording.
+only state is the velocity filters' and the plays' positions, restarted at every recording.
 """
 
 import math
@@ -58,6 +60,9 @@ class DerivedInputs:
     started at the recording's first observed angle, a missing (or infinite) angle gives
     missing hysteresis inputs and leaves them alone.
 
+    The slow velocity filter (``slow_filter_decay``) is a second such filter on the unfiltered
+    velocity, with its own state.
+
     Parameters
     ----------
     settings : dict
@@ -77,6 +82,8 @@ class DerivedInputs:
         widths = self.friction_velocity
         self.widths = tuple(widths) if isinstance(widths, list | tuple) else (widths,)
         self.decay = settings["filter_decay"]
+        slow = settings.get("slow_filter_decay")
+        self.slow = None if slow is None else LowPass(slow)
         self.sampling_period = settings["sampling_period"]
         self.angle = settings["angle_position"]
         self.radii = tuple(float(r) for r in settings["friction_angle"] or ())
@@ -84,29 +91,44 @@ class DerivedInputs:
         self.lead_position = settings.get("lead_position")
         self.loads = tuple(int(p) for p in settings["load_positions"])
         self.powers = tuple(int(p) for p in settings["powers"])
-        if self.decay is not None:
-            self.decay = float(self.decay)
-            self.gain = 1.0 - self.decay
+        self.filter = None if self.decay is None else LowPass(self.decay)
         self.reset()
+
+    def __setstate__(self, state):
+        # a stream pickled before the filters were LowPass objects held one filter's state
+        if "filter" not in state:
+            state = dict(state)
+            decay = state.pop("decay", None)
+            state["filter"] = None if decay is None else LowPass(decay)
+            if decay is not None:
+                state["filter"].filtered = state.pop("filtered", None)
+                state["filter"].since = state.pop("since", 0)
+            state["decay"], state["slow"] = decay, None
+            state.pop("gain", None)
+        self.__dict__.update(state)
 
     @property
     def n_features_out(self):
         return len(self.feature_names_out)
 
     def reset(self):
-        """Restart the velocity filter and the plays (a new recording)."""
-        self.filtered = None  # the filter's output at the last observed velocity
-        self.since = 0  # rows since that velocity
+        """Restart the velocity filters and the plays (a new recording)."""
+        for low_pass in (self.filter, self.slow):
+            if low_pass is not None:
+                low_pass.reset()
         self.plays = None  # the plays' positions, from the first observed angle
 
     def append(self, values):
         """Append the derived inputs of one row (a list of floats, extended in place)."""
         if self.friction is not None:
-            velocity = values[self.friction]
-            if self.decay is not None:
-                velocity = self.low_pass(velocity)
+            measured = values[self.friction]
+            velocity = measured if self.filter is None else self.filter.step(measured)
             for width in self.widths:
                 values.append(math.tanh(velocity / width))
+            if self.slow is not None:
+                slow = self.slow.step(measured)
+                for width in self.widths:
+                    values.append(math.tanh(slow / width))
         if self.angle is not None:
             angle = values[self.angle]
             if self.lead is not None:
@@ -140,33 +162,47 @@ class DerivedInputs:
             out.append((angle - position) / radius)
         return out
 
-    def low_pass(self, velocity):
-        """The filtered velocity of the next row (NaN for a missing one)."""
-        self.since += 1
-        if not math.isfinite(velocity):
-            return math.nan
-        decay, gain, last = self.decay, self.gain, self.filtered
-        # The operations of the batch filter (scipy's lfilter started at ``zi``), in its order.
-        if last is None:
-            last = gain * velocity + decay * velocity
-        elif self.since == 1:
-            last = gain * velocity + decay * last
-        else:
-            lapse = decay**self.since
-            last = gain * velocity + (lapse * last + (decay - lapse) * velocity)
-        self.filtered, self.since = last, 0
-        return last
-
     def check_time(self, time, groups):
         """Refuse time stamps whose median step in a recording is not ``sampling_period``
-        (within 1 %), as the step's own transform does (for the velocity filter)."""
-        if self.decay is None or time is None:
+        (within 1 %), as the step's own transform does (for the velocity filters)."""
+        if (self.filter is None and self.slow is None) or time is None:
             return
         recordings = as_recordings(groups, len(time))
         check_time_steps(np.asarray(time, dtype=float), recordings, self.sampling_period)
 
     def __repr__(self):
         return f"DerivedInputs({self.n_features_in} -> {self.n_features_out} inputs)"
+
+
+class LowPass:
+    """A causal first-order filter of decay ``decay`` per row, one sample at a time: that of
+    :func:`skhmmgmr.torque_pipeline._derived_inputs.low_pass` (see :class:`DerivedInputs`)."""
+
+    def __init__(self, decay):
+        self.decay = float(decay)
+        self.gain = 1.0 - self.decay
+        self.reset()
+
+    def reset(self):
+        self.filtered = None  # the output at the last observed value
+        self.since = 0  # rows since that value
+
+    def step(self, value):
+        """The filtered value of the next row (NaN for a missing one)."""
+        self.since += 1
+        if not math.isfinite(value):
+            return math.nan
+        decay, gain, last = self.decay, self.gain, self.filtered
+        # The operations of the batch filter (scipy's lfilter started at ``zi``), in its order.
+        if last is None:
+            last = gain * value + decay * value
+        elif self.since == 1:
+            last = gain * value + decay * last
+        else:
+            lapse = decay**self.since
+            last = gain * value + (lapse * last + (decay - lapse) * value)
+        self.filtered, self.since = last, 0
+        return last
 
 
 def check_time_steps(time, recordings, period):

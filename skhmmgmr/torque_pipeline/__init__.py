@@ -10,6 +10,7 @@ from ._driver_model import DEFAULT_PERTURBATION_PENALTY as DEFAULT_PERTURBATION_
 from ._driver_model import DriverModel, make_driver_model
 from ._friction_search import ANGLE_LEADS as ANGLE_LEADS
 from ._friction_search import FILTER_CANDIDATES as FILTER_CANDIDATES
+from ._friction_search import SLOW_FILTER_CANDIDATES as SLOW_FILTER_CANDIDATES
 from ._friction_search import WIDTH_GRID as WIDTH_GRID
 from ._pipeline import TorquePipeline, make_torque_pipeline
 from ._steering_features import SteeringFeatures

@@ -47,6 +47,8 @@ from ..streaming._derived import check_time_steps
 FRICTION_NAME = "steering_friction"
 #: The prefix of the names of the hysteresis inputs.
 HYSTERESIS_NAME = "steering_hysteresis"
+#: The prefix of the names of the friction inputs of the slow velocity.
+SLOW_FRICTION_NAME = "steering_friction_slow"
 
 
 def friction_input(velocity, friction_velocity):
@@ -64,19 +66,27 @@ def friction_widths(friction):
     return (float(friction),)
 
 
-def friction_names(friction):
+def friction_names(friction, prefix=FRICTION_NAME):
     """The names of the friction inputs of ``friction``: ``steering_friction`` for one band,
-    ``steering_friction_<width>`` (three significant digits) for every width of a basis."""
+    ``steering_friction_<width>`` (three significant digits) for every width of a basis
+    (``prefix`` in place of ``steering_friction``: ``steering_friction_slow`` for those of the
+    slow velocity)."""
     if friction is None:
         return []
     if isinstance(friction, tuple | list):
-        return [f"{FRICTION_NAME}_{float(width):.3g}" for width in friction]
-    return [FRICTION_NAME]
+        return [f"{prefix}_{float(width):.3g}" for width in friction]
+    return [prefix]
 
 
-def friction_inputs(velocity, friction):
+def slow_friction_names(friction, slow):
+    """The names of the friction inputs of the slow velocity: those of ``friction`` with the
+    prefix ``steering_friction_slow``, none without a slow velocity filter (``slow``)."""
+    return [] if slow is None else friction_names(friction, SLOW_FRICTION_NAME)
+
+
+def friction_inputs(velocity, friction, prefix=FRICTION_NAME):
     """The friction inputs of ``friction`` (see :func:`friction_names`) of every row, by name."""
-    names = friction_names(friction)
+    names = friction_names(friction, prefix)
     widths = friction_widths(friction)
     return {name: friction_input(velocity, w) for name, w in zip(names, widths, strict=True)}
 
@@ -156,24 +166,26 @@ def recording_hysteresis(angle, layout, radii):
     return inputs
 
 
-def derived_names(friction, load_columns, powers, radii=None):
+def derived_names(friction, load_columns, powers, radii=None, slow=None):
     """The names of the derived inputs, in their order: the friction inputs of ``friction``
-    (a ``friction_velocity``, see :func:`friction_names`), the hysteresis inputs of ``radii``
-    (a ``friction_angle``), then the signed powers of every load column."""
-    names = friction_names(friction) + hysteresis_names(radii)
+    (a ``friction_velocity``, see :func:`friction_names`), those of the slow velocity (with a
+    ``slow_velocity_filter`` ``slow``), the hysteresis inputs of ``radii`` (a
+    ``friction_angle``), then the signed powers of every load column."""
+    names = friction_names(friction) + slow_friction_names(friction, slow)
+    names += hysteresis_names(radii)
     names += [power_name(column, power) for column in load_columns for power in powers]
     return names
 
 
-def derived_units(units, friction, load_columns, powers, radii=None):
+def derived_units(units, friction, load_columns, powers, radii=None, slow=None):
     """The units of the input columns (a mapping of names to units, or ``None``) with those of
-    the derived inputs added: 1 for the friction inputs of ``friction`` and the hysteresis
-    inputs of ``radii``, ``(unit)^p`` for the power ``p`` of a column with a unit; ``None``
-    without units."""
+    the derived inputs added: 1 for the friction inputs of ``friction`` (and of the slow
+    velocity, with ``slow``) and the hysteresis inputs of ``radii``, ``(unit)^p`` for the
+    power ``p`` of a column with a unit; ``None`` without units."""
     if not isinstance(units, dict):
         return None
     units = dict(units)
-    for name in friction_names(friction) + hysteresis_names(radii):
+    for name in derived_names(friction, (), (), radii, slow):
         units[name] = "1"
     for column in load_columns:
         unit = units.get(column)
@@ -272,6 +284,14 @@ def fitted_radii(radii):
     return (float(radii),)
 
 
+def fitted_slow(slow, friction):
+    """A ``slow_velocity_filter`` as the fitted step holds it: a float, ``"auto"``, or
+    ``None`` (no slow velocity, or no friction input to give it)."""
+    if slow is None or friction is None:
+        return None
+    return slow if isinstance(slow, str) else float(slow)
+
+
 def fitted_lead(lead, radii):
     """An ``angle_lead`` as the fitted step holds it: a float, ``"auto"``, or ``None`` for the
     angle itself (a lead of 0, or no plays)."""
@@ -297,8 +317,82 @@ def check_settings(step):
         check_widths(step.friction_velocity, "friction_velocity", friction_names)
     if isinstance(step.friction_angle, tuple | list):
         check_widths(step.friction_angle, "friction_angle", hysteresis_names)
-    for name in ("friction_velocity", "velocity_filter", "sampling_period", "angle_lead"):
+    for name in (
+        "friction_velocity",
+        "velocity_filter",
+        "sampling_period",
+        "angle_lead",
+        "slow_velocity_filter",
+    ):
         value = getattr(step, name)
         real = isinstance(value, numbers.Real) and not isinstance(value, bool)
         if real and not math.isfinite(value):
             raise ValueError(f"{name} must be finite; got {name}={value!r}.")
+
+
+def source_positions(step):
+    """Position of every source column of ``step`` (a ``SteeringFeatures`` in its ``fit`` or
+    after), with an error naming the missing ones."""
+    needed = list(step.load_columns)
+    if step.friction_angle is not None:
+        needed.insert(0, step.angle_column)
+    led = step.angle_lead is not None and step.friction_angle is not None
+    if step.friction_velocity is not None or led:
+        needed.insert(0, step.friction_column)
+    names = getattr(step, "feature_names_in_", None)
+    positions, missing = {}, []
+    for column in needed:
+        if isinstance(column, str):
+            if names is None or column not in names:
+                missing.append(column)
+            else:
+                positions[column] = int(np.flatnonzero(names == column)[0])
+        elif isinstance(column, numbers.Integral) and not isinstance(column, bool):
+            if column >= step.n_features_in_:
+                missing.append(column)
+            positions[column] = int(column)
+        else:
+            raise TypeError(f"columns are names or positions; got {column!r}.")
+    if missing:
+        where = (
+            "X has no column names (pass a DataFrame, or positions for an array)"
+            if names is None
+            else f"X has columns {list(names)}"
+        )
+        raise ValueError(
+            f"SteeringFeatures needs the column(s) {missing} (friction_column / "
+            f"angle_column / load_columns); {where}."
+        )
+    return positions
+
+
+def stream_description(step):
+    """The plain description a fitted ``SteeringFeatures`` gives of itself for a stream (see
+    its ``stream_settings``)."""
+    positions = source_positions(step)
+    names = getattr(step, "feature_names_in_", None)
+    friction, radii, lead = step.friction_velocity_, step.friction_angle_, step.angle_lead_
+    slow = step.slow_velocity_filter_
+    filtered = friction is not None and step.velocity_filter_ is not None
+    if isinstance(friction, tuple):
+        friction = list(friction_widths(friction))
+    elif friction is not None:
+        friction = float(friction)
+    return {
+        "n_features_in": int(step.n_features_in_),
+        "feature_names_in": None if names is None else [str(name) for name in names],
+        "feature_names_out": [str(name) for name in step.get_feature_names_out()],
+        "friction_position": None if friction is None else positions[step.friction_column],
+        "friction_velocity": friction,
+        "filter_decay": (
+            filter_decay(step.sampling_period_, step.velocity_filter_) if filtered else None
+        ),
+        "sampling_period": None if step.sampling_period_ is None else float(step.sampling_period_),
+        "angle_position": None if radii is None else positions[step.angle_column],
+        "friction_angle": None if radii is None else [float(r) for r in radii],
+        "angle_lead": None if lead is None else float(lead),
+        "slow_filter_decay": (None if slow is None else filter_decay(step.sampling_period_, slow)),
+        "lead_position": None if lead is None else positions[step.friction_column],
+        "load_positions": [positions[column] for column in step.load_columns],
+        "powers": [int(power) for power in step.powers],
+    }

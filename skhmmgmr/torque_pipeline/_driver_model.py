@@ -338,6 +338,7 @@ def make_driver_model(
         # no plays on the angle: the driver model was measured at the wheel without them
         friction_angle=None,
         angle_lead=None,
+        slow_velocity_filter=None,
         random_state=random_state,
         **params,
     )

@@ -27,7 +27,9 @@ recordings:
   ladder, with each velocity filter of :data:`FILTER_CANDIDATES`, the plays reading the
   angle or, with ``angle_lead="auto"``, the angle led on the velocity by each lead of
   :data:`ANGLE_LEADS` (an angle sensor's steps may be coarser than the plays: the velocity
-  places the angle between them);
+  places the angle between them), and with ``slow_velocity_filter="auto"`` each basis also
+  on the velocity through each slow filter of :data:`SLOW_FILTER_CANDIDATES` (a column
+  whose friction lags the wheel), or not;
 - **the score**: the held-out error of a least-squares fit of the target on the inputs, the
   load inputs and the candidate's friction and hysteresis inputs, the recordings split in
   :data:`SEARCH_FOLDS` folds;
@@ -71,6 +73,9 @@ RADIUS_GRID = tuple(0.001 * 2.0**k for k in range(-4, 7))
 ANGLE_QUANTILES = (0.05, 0.25)
 #: The velocity filters [s] ``velocity_filter="auto"`` compares (``None``: no filter).
 FILTER_CANDIDATES = (None, 0.02, 0.05)
+#: The slow velocity filters [s] ``slow_velocity_filter="auto"`` compares (``None``: no
+#: friction inputs of a slow velocity).
+SLOW_FILTER_CANDIDATES = (None, 0.1, 0.2)
 #: The leads [s] ``angle_lead="auto"`` compares (``None``: the plays read the angle itself).
 ANGLE_LEADS = (None, 0.02, 0.05)
 #: Folds of the inner validation of the "auto" choices.
@@ -80,14 +85,15 @@ SEARCH_FOLDS = 3
 PARSIMONY = 0.005
 
 
-def search_filters(velocity_filter, sampling_period):
-    """The velocity filters the inner validation compares: every candidate of ``"auto"``
-    (none without the sampling period, which a filter needs), the setting itself otherwise."""
+def search_filters(velocity_filter, sampling_period, candidates=FILTER_CANDIDATES):
+    """The velocity filters the inner validation compares: every one of ``candidates`` for
+    ``"auto"`` (none without the sampling period, which a filter needs), the setting itself
+    otherwise."""
     if velocity_filter != AUTO:
         return (velocity_filter,)
     if sampling_period is None:
         return (None,)
-    return FILTER_CANDIDATES
+    return candidates
 
 
 def search_leads(angle_lead):
@@ -154,7 +160,7 @@ def friction_search(base, target, recordings, searched, settings):
         Per velocity filter and angle lead: the filter's time constant, the friction and
         hysteresis columns they give (one per width) and their candidates, each the settings
         it stands for (``friction_velocity``, ``friction_angle``, ``angle_lead``) and the
-        indices of its columns.
+        indices of its columns (``settings`` holds ``slow_velocity_filter`` too).
     settings : str
         The settings searched, for the error when the rows are too few.
 
@@ -162,7 +168,8 @@ def friction_search(base, target, recordings, searched, settings):
     -------
     table : DataFrame
         The settings of every candidate (``friction_velocity``: a width, a tuple of widths or
-        None; ``friction_angle``: a tuple of half-widths or None; ``angle_lead``),
+        None; ``friction_angle``: a tuple of half-widths or None; ``angle_lead``;
+        ``slow_velocity_filter``),
         ``velocity_filter``,
         ``n_friction_inputs`` (friction and hysteresis inputs), ``validation_rmse`` and
         ``chosen`` (by the rule of the module's docstring; the first of equal ones in the
@@ -187,9 +194,9 @@ def friction_search(base, target, recordings, searched, settings):
         products = {fold: _products(joined[folds == fold]) for fold in used}
         total = sum(products.values())
         n_base, n_outputs = base.shape[1], target.shape[1]
-        outputs = list(range(joined.shape[1] - n_outputs, joined.shape[1]))
+        outputs = np.arange(joined.shape[1] - n_outputs, joined.shape[1])
         for settings_of, indices in candidates:
-            inputs = [*range(n_base), *(n_base + i for i in indices)]
+            inputs = np.array([*range(n_base), *(n_base + i for i in indices)], dtype=np.intp)
             squared = sum(
                 _held_out_squares(total - products[fold], products[fold], inputs, outputs)
                 for fold in used
@@ -246,12 +253,14 @@ def _products(joined):
 def _held_out_squares(trained, held_out, inputs, outputs):
     """Sum of squared residuals on the held-out fold of the least-squares fit of the columns
     ``outputs`` on the columns ``inputs``, from the sums of products of the training rows and
-    of the held-out ones, a tiny ridge keeping it solvable."""
-    gram, cross = trained[np.ix_(inputs, inputs)], trained[np.ix_(inputs, outputs)]
+    of the held-out ones, a tiny ridge keeping it solvable. ``inputs`` and ``outputs``:
+    arrays of column indices."""
+    rows, output_rows = inputs[:, None], outputs[:, None]
+    gram, cross = trained[rows, inputs], trained[rows, outputs]
     ridge = 1e-9 * np.trace(gram) / len(inputs)
     coef = np.linalg.solve(gram + ridge * np.eye(len(inputs)), cross)
-    products, targets = held_out[np.ix_(inputs, inputs)], held_out[np.ix_(inputs, outputs)]
-    squares = held_out[np.ix_(outputs, outputs)]
+    products, targets = held_out[rows, inputs], held_out[rows, outputs]
+    squares = held_out[output_rows, outputs]
     return float(np.trace(squares - 2.0 * coef.T @ targets + coef.T @ products @ coef))
 
 
@@ -281,9 +290,18 @@ def candidate_table(step, layout, values, y, positions, settings):
         if lead is not None:
             led = led_angle(angle, values[:, positions[step.friction_column]], lead)
         hysteresis[lead] = list(recording_hysteresis(led, layout, radii).values())
-    velocity = None
+    velocity, slow_filters = None, (None,)
     if step.friction_velocity is not None:
         velocity = values[:, positions[step.friction_column]]
+        slow_filters = search_filters(
+            step.slow_velocity_filter_, step.sampling_period_, SLOW_FILTER_CANDIDATES
+        )
+    # the slow velocities, filtered once for every velocity filter's ladder
+    slow_velocities = {
+        slow: filtered_velocity(velocity, layout, step.sampling_period_, slow)
+        for slow in slow_filters
+        if slow is not None
+    }
     searched = []
     for time_constant in search_filters(step.velocity_filter_, step.sampling_period_):
         if velocity is None:
@@ -299,6 +317,11 @@ def candidate_table(step, layout, values, y, positions, settings):
                 widths = friction_widths(step.friction_velocity_)
                 bands = [(step.friction_velocity_, tuple(range(len(widths))))]
         columns = list(friction_inputs(filtered, widths).values()) if widths else []
+        # the friction inputs of every slow velocity, on the same ladder (offset: their first)
+        offsets = {None: None}
+        for slow, slowed in slow_velocities.items():
+            offsets[slow] = len(columns)
+            columns += list(friction_inputs(slowed, widths).values()) if widths else []
         for lead in leads:
             # without plays a lead changes nothing: those candidates come with the first
             candidates = [
@@ -307,10 +330,16 @@ def candidate_table(step, layout, values, y, positions, settings):
                         "friction_velocity": band,
                         "friction_angle": play,
                         "angle_lead": None if play is None else lead,
+                        "slow_velocity_filter": slow,
                     },
-                    (*band_columns, *(len(widths) + i for i in play_columns)),
+                    (
+                        *band_columns,
+                        *(() if slow is None else (offsets[slow] + i for i in band_columns)),
+                        *(len(columns) + i for i in play_columns),
+                    ),
                 )
                 for band, band_columns in bands
+                for slow in (slow_filters if band is not None else (None,))
                 for play, play_columns in plays
                 if play is not None or lead == leads[0]
             ]

@@ -470,6 +470,7 @@ def make_torque_pipeline(
     output_smoothing="auto",
     friction_angle="auto",
     angle_lead="auto",
+    slow_velocity_filter="auto",
     **params,
 ):
     """HMM-GMR behind the steering system's derived inputs: a scikit-learn ``Pipeline``.
@@ -491,11 +492,14 @@ def make_torque_pipeline(
     n_states : int, default=5
         Number of hidden states of the regressor; choose it on validation recordings
         (:class:`~skhmmgmr.StateSelector`, or a ``GridSearchCV`` over ``hmmgmr__n_states``).
-    friction_velocity, load_columns, powers, velocity_filter, friction_angle, angle_lead
+    friction_velocity, load_columns, powers, velocity_filter, friction_angle, angle_lead, \
+slow_velocity_filter
         Passed to :class:`SteeringFeatures`. By default (``"auto"``) the friction inputs (a
         basis of one or several widths, from the narrowest the velocity resolves to the widest
         the data needs, or none), the hysteresis inputs (plays on the steering-wheel angle, or
-        none) and the velocity filter are chosen in ``fit`` on the training recordings
+        none), the velocity filter and the slow velocity filter (friction inputs of the
+        velocity low-passed over 0.1 or 0.2 s as well, or none) are chosen in ``fit`` on the
+        training recordings
         (``pipeline[0].friction_search_``), so that they suit the car; a number fixes one
         band, a tuple of widths a basis; ``friction_angle=None`` leaves out the hysteresis
         inputs, whose plays restart at every recording. The filter is
@@ -538,7 +542,7 @@ def make_torque_pipeline(
         params,
         "make_torque_pipeline",
         "n_states, friction_velocity, load_columns, powers, velocity_filter, sampling_period, "
-        "output_smoothing, friction_angle, angle_lead",
+        "output_smoothing, friction_angle, angle_lead, slow_velocity_filter",
     )
     return TorquePipeline(
         [
@@ -552,6 +556,7 @@ def make_torque_pipeline(
                     sampling_period=sampling_period,
                     friction_angle=friction_angle,
                     angle_lead=angle_lead,
+                    slow_velocity_filter=slow_velocity_filter,
                 ),
             ),
             (

@@ -180,6 +180,8 @@ def _steering_dict(name, step):
         params |= {key: _plain(_fitted_param(step, key)) for key in HYSTERESIS_PARAMS}
     if step.angle_lead_ is not None:  # and of their lead, when there is one
         params["angle_lead"] = _plain(step.angle_lead_)
+    if step.slow_velocity_filter_ is not None:  # the slow velocity, when there is one
+        params["slow_velocity_filter"] = _plain(step.slow_velocity_filter_)
     return {
         "name": str(name),
         "type": STEERING_TYPE,

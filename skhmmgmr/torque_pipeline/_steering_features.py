@@ -23,26 +23,34 @@ from .._core._panel import in_filter_order
 from .._core._pickled import PickleVersionMixin
 from .._core._sequences import median_time_step
 from ._derived_inputs import (
+    SLOW_FRICTION_NAME,
     check_settings,
     derived_names,
     derived_units,
-    filter_decay,
     filtered_velocity,
     fitted_friction,
     fitted_lead,
     fitted_radii,
+    fitted_slow,
     friction_inputs,
-    friction_widths,
     hysteresis_names,
     led_angle,
     load_inputs,
     recording_hysteresis,
+    source_positions,
+    stream_description,
 )
 from ._friction_search import AUTO, RADIUS_GRID, WIDTH_GRID, candidate_table
 
 AUTO_OPTION = StrOptions({AUTO})
 #: The settings ``fit`` may choose.
-LEARNED = ("friction_velocity", "velocity_filter", "friction_angle", "angle_lead")
+LEARNED = (
+    "friction_velocity",
+    "velocity_filter",
+    "friction_angle",
+    "angle_lead",
+    "slow_velocity_filter",
+)
 
 
 @fill_shared_parameters
@@ -108,6 +116,15 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         velocity of each recording (its output equals it there); a missing velocity gives a
         missing friction input and leaves the filter's state alone, and the next observed
         velocity is taken in over the whole time since the last one.
+    slow_velocity_filter : float, "auto" or None, default=None
+        Time constant [s] of a second causal first-order low-pass filter on the (unfiltered)
+        velocity, with its own state: the friction inputs of that slow velocity,
+        ``steering_friction_slow`` (one band) or ``steering_friction_slow_<w_j>`` (a basis),
+        of the same widths as the friction inputs, follow a column whose friction lags the
+        wheel. Started, restarted and kept over missing velocities as ``velocity_filter``;
+        it needs the sampling period too. ``"auto"``: none, 0.1 or 0.2 s
+        (``SLOW_FILTER_CANDIDATES``), chosen in ``fit`` with the friction inputs (none
+        without a sampling period or a friction input). ``None``: no such inputs.
     {sampling_period}
         ``None``: read in ``fit`` from the ``time`` level of the index of ``X`` (a panel) when
         a velocity filter needs it, as the median step between consecutive rows of a
@@ -126,15 +143,19 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         The velocity filter's time constant the transform uses (``None``: no filter).
     angle_lead_ : float or None
         The plays' lead on the velocity [s] (``None``: the angle itself, or no plays).
+    slow_velocity_filter_ : float or None
+        The slow velocity filter's time constant the transform uses (``None``: no friction
+        inputs of a slow velocity).
     sampling_period_ : float or None
         The seconds between two rows the velocity filter uses: ``sampling_period``, or the
         one read from the time index in ``fit`` (``None``: unknown).
     friction_search_ : DataFrame or None
         The ``"auto"`` choice: one row per candidate, with ``friction_velocity`` (a width, a
         tuple of widths or None), ``friction_angle`` (a tuple of half-widths or None),
-        ``velocity_filter``, ``angle_lead``, ``n_friction_inputs`` (friction and hysteresis inputs),
-        ``validation_rmse`` (held-out root mean squared error of the linear fit, in the
-        target's unit) and ``chosen``; ``None`` without an ``"auto"`` setting.
+        ``velocity_filter``, ``angle_lead``, ``slow_velocity_filter``, ``n_friction_inputs``
+        (friction and hysteresis inputs), ``validation_rmse`` (held-out root mean squared
+        error of the linear fit, in the target's unit) and ``chosen``; ``None`` without an
+        ``"auto"`` setting.
     n_features_in_ : int
         Number of input columns.
     feature_names_in_ : ndarray of shape (n_features,)
@@ -201,6 +222,11 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         ],
         "sampling_period": [Interval(numbers.Real, 0, None, closed="neither"), None],
         "angle_lead": [Interval(numbers.Real, None, None, closed="neither"), AUTO_OPTION, None],
+        "slow_velocity_filter": [
+            Interval(numbers.Real, 0, None, closed="neither"),
+            AUTO_OPTION,
+            None,
+        ],
     }
 
     def __init__(
@@ -214,6 +240,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         friction_angle=None,
         angle_column="steering_wheel_angle",
         angle_lead=None,
+        slow_velocity_filter=None,
     ):
         self.friction_velocity = friction_velocity
         self.friction_column = friction_column
@@ -224,6 +251,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         self.friction_angle = friction_angle
         self.angle_column = angle_column
         self.angle_lead = angle_lead
+        self.slow_velocity_filter = slow_velocity_filter
 
     __metadata_request__fit = {"groups": True}
     __metadata_request__transform = {"groups": True}
@@ -234,11 +262,10 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             state = {**state, "sampling_period_": state.get("sampling_period")}
         # one pickled before the hysteresis inputs existed had none
         state = {"friction_angle": None, "angle_column": "steering_wheel_angle", **state}
-        state = {"angle_lead": None, **state}
-        if "n_features_in_" in state and "friction_angle_" not in state:
-            state["friction_angle_"] = None
-        if "n_features_in_" in state and "angle_lead_" not in state:
-            state["angle_lead_"] = None
+        state = {"angle_lead": None, "slow_velocity_filter": None, **state}
+        for name in ("friction_angle_", "angle_lead_", "slow_velocity_filter_"):
+            if "n_features_in_" in state and name not in state:
+                state[name] = None
         super().__setstate__(state)
 
     @_fit_context(prefer_skip_nested_validation=True)
@@ -267,6 +294,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         self.friction_velocity_ = fitted_friction(self.friction_velocity)
         self.friction_angle_ = fitted_radii(self.friction_angle)
         self.angle_lead_ = fitted_lead(self.angle_lead, self.friction_angle_)
+        self.slow_velocity_filter_ = fitted_slow(self.slow_velocity_filter, self.friction_velocity)
         self._check_inputs()
         self.velocity_filter_ = None if self.friction_velocity is None else self.velocity_filter
         self.sampling_period_ = self.sampling_period
@@ -277,7 +305,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
                 f"{self._settings()}: an 'auto' setting is chosen on the target, so fit needs "
                 "y (the torque)."
             )
-        needs_period = self.velocity_filter_ is not None and self.sampling_period is None
+        needs_period = bool(self._filters()) and self.sampling_period is None
         if searched or needs_period:
             target = y if searched else None
             in_filter_order(self._fit_in_filter_order, X, groups, y=target, rows={"values": values})
@@ -286,30 +314,42 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     def _fit_in_filter_order(self, layout, X, values, y=None):
         """The learned settings from rows in filter order and their recordings' ``layout``:
         the sampling period (when a filter needs it), then the ``"auto"`` choice."""
-        if self.velocity_filter_ is not None and self.sampling_period_ is None:
+        if self._filters() and self.sampling_period_ is None:
             if layout.time is not None:
                 layout.recordings(len(values))  # the time checked to increase first
                 self.sampling_period_ = median_time_step(layout.time, layout.groups)
-            if self.velocity_filter_ != AUTO and self.sampling_period_ is None:
+            fixed = [name for name in self._filters() if getattr(self, name) != AUTO]
+            if fixed and self.sampling_period_ is None:
                 raise ValueError(
-                    f"velocity_filter={self.velocity_filter!r} needs sampling_period (the "
+                    f"{fixed[0]}={getattr(self, fixed[0])!r} needs sampling_period (the "
                     "seconds between two rows), or X with a 'time' index level to read it "
                     "from; got sampling_period=None."
                 )
         if AUTO not in self._learned():
             return
         self.friction_search_ = candidate_table(
-            self, layout, values, y, self._sources(), self._settings()
+            self, layout, values, y, source_positions(self), self._settings()
         )
         chosen = self.friction_search_[self.friction_search_["chosen"]].iloc[0]
         self.friction_velocity_ = fitted_friction(chosen["friction_velocity"])
         self.friction_angle_ = fitted_radii(chosen["friction_angle"])
         self.velocity_filter_ = chosen["velocity_filter"]
         self.angle_lead_ = fitted_lead(chosen["angle_lead"], self.friction_angle_)
+        self.slow_velocity_filter_ = fitted_slow(
+            chosen["slow_velocity_filter"], self.friction_velocity_
+        )
         if self.friction_velocity_ is None:
             self.velocity_filter_ = None
         elif self.velocity_filter_ is not None:
             self.velocity_filter_ = float(self.velocity_filter_)
+
+    def _filters(self):
+        """The velocity filters the fitted step runs (or may choose), by parameter name."""
+        return [
+            name
+            for name in ("velocity_filter", "slow_velocity_filter")
+            if getattr(self, f"{name}_") is not None
+        ]
 
     def _learned(self):  # the settings fit may choose ("auto" before the choice)
         return tuple(getattr(self, f"{name}_") for name in LEARNED)
@@ -319,7 +359,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         return (
             f"friction_velocity={self.friction_velocity!r}, "
             f"velocity_filter={self.velocity_filter!r}, "
-            f"friction_angle={self.friction_angle!r}, angle_lead={self.angle_lead!r}"
+            f"friction_angle={self.friction_angle!r}, angle_lead={self.angle_lead!r}, "
+            f"slow_velocity_filter={self.slow_velocity_filter!r}"
         )
 
     def _check_parameters(self):  # what the parameters' constraints cannot say
@@ -327,7 +368,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
 
     def _check_inputs(self):
         """The fitted inputs hold the source columns and none of the derived ones."""
-        self._sources()
+        source_positions(self)
         inputs = [str(name) for name in getattr(self, "feature_names_in_", ())]
         taken = [name for name in self._derived_names() if name in inputs]
         if taken:
@@ -385,15 +426,21 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         named = isinstance(X, pd.DataFrame) and hasattr(self, "feature_names_in_")
         frame = X if named else None
         values = validate_data(self, X, ensure_all_finite="allow-nan", reset=False)
-        positions = self._sources()
+        positions = source_positions(self)
         derived = {}
         if self.friction_velocity_ is not None:
-            velocity = values[:, positions[self.friction_column]]
+            measured = values[:, positions[self.friction_column]]
+            velocity = measured
             if self.velocity_filter_ is not None:
                 velocity = in_filter_order(
-                    self._filter_in_filter_order, X, groups, rows={"velocity": velocity}
+                    self._filter_in_filter_order, X, groups, rows={"velocity": measured}
                 )
             derived.update(friction_inputs(velocity, self.friction_velocity_))
+            if self.slow_velocity_filter_ is not None:
+                slow = in_filter_order(
+                    self._slow_in_filter_order, X, groups, rows={"velocity": measured}
+                )
+                derived.update(friction_inputs(slow, self.friction_velocity_, SLOW_FRICTION_NAME))
         if self.friction_angle_ is not None:
             angle = values[:, positions[self.angle_column]]
             if self.angle_lead_ is not None:
@@ -413,6 +460,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             self.load_columns,
             self.powers,
             self.friction_angle_,
+            self.slow_velocity_filter_,
         )
         out.attrs = {**frame.attrs, "units": units}
         if units is None:
@@ -422,6 +470,11 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
     def _filter_in_filter_order(self, layout, X, velocity):
         """The velocity of rows in filter order through the fitted velocity filter."""
         return filtered_velocity(velocity, layout, self.sampling_period_, self.velocity_filter_)
+
+    def _slow_in_filter_order(self, layout, X, velocity):
+        """The velocity of rows in filter order through the fitted slow velocity filter."""
+        period, time_constant = self.sampling_period_, self.slow_velocity_filter_
+        return filtered_velocity(velocity, layout, period, time_constant)
 
     def _play_in_filter_order(self, layout, X, angle):
         """The hysteresis inputs of rows in filter order, one column per play."""
@@ -472,6 +525,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             inputs) and ``friction_angle`` (the list of the plays' half-widths);
             ``angle_lead`` and ``lead_position`` (the velocity's position; ``None``
             without a lead): the plays read ``angle + angle_lead * velocity``;
+            ``slow_filter_decay``, the slow velocity filter's factor per row (``None``
+            without it: no friction inputs of a slow velocity);
             ``load_positions`` (the load columns' positions) and ``powers``.
 
         Examples
@@ -487,33 +542,7 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
         0.6065
         """
         check_is_fitted(self, "n_features_in_")
-        positions = self._sources()
-        names = getattr(self, "feature_names_in_", None)
-        friction, radii, lead = self.friction_velocity_, self.friction_angle_, self.angle_lead_
-        filtered = friction is not None and self.velocity_filter_ is not None
-        if isinstance(friction, tuple):
-            friction = list(friction_widths(friction))
-        elif friction is not None:
-            friction = float(friction)
-        return {
-            "n_features_in": int(self.n_features_in_),
-            "feature_names_in": None if names is None else [str(name) for name in names],
-            "feature_names_out": [str(name) for name in self.get_feature_names_out()],
-            "friction_position": None if friction is None else positions[self.friction_column],
-            "friction_velocity": friction,
-            "filter_decay": (
-                filter_decay(self.sampling_period_, self.velocity_filter_) if filtered else None
-            ),
-            "sampling_period": None
-            if self.sampling_period_ is None
-            else float(self.sampling_period_),
-            "angle_position": None if radii is None else positions[self.angle_column],
-            "friction_angle": None if radii is None else [float(r) for r in radii],
-            "angle_lead": None if lead is None else float(lead),
-            "lead_position": None if lead is None else positions[self.friction_column],
-            "load_positions": [positions[column] for column in self.load_columns],
-            "powers": [int(power) for power in self.powers],
-        }
+        return stream_description(self)
 
     def _derived_names(self):
         """The derived inputs' names; before an ``"auto"`` choice, every name it may give."""
@@ -522,41 +551,8 @@ class SteeringFeatures(PickleVersionMixin, TransformerMixin, BaseEstimator):
             friction = WIDTH_GRID
         if isinstance(radii, str):
             radii = RADIUS_GRID
-        return derived_names(friction, self.load_columns, self.powers, radii)
-
-    def _sources(self):
-        """Position of every source column, with an error naming the missing ones."""
-        needed = list(self.load_columns)
-        if self.friction_angle is not None:
-            needed.insert(0, self.angle_column)
-        led = self.angle_lead is not None and self.friction_angle is not None
-        if self.friction_velocity is not None or led:
-            needed.insert(0, self.friction_column)
-        names = getattr(self, "feature_names_in_", None)
-        positions, missing = {}, []
-        for column in needed:
-            if isinstance(column, str):
-                if names is None or column not in names:
-                    missing.append(column)
-                else:
-                    positions[column] = int(np.flatnonzero(names == column)[0])
-            elif isinstance(column, numbers.Integral) and not isinstance(column, bool):
-                if column >= self.n_features_in_:
-                    missing.append(column)
-                positions[column] = int(column)
-            else:
-                raise TypeError(f"columns are names or positions; got {column!r}.")
-        if missing:
-            where = (
-                "X has no column names (pass a DataFrame, or positions for an array)"
-                if names is None
-                else f"X has columns {list(names)}"
-            )
-            raise ValueError(
-                f"SteeringFeatures needs the column(s) {missing} (friction_column / "
-                f"angle_column / load_columns); {where}."
-            )
-        return positions
+        slow = self.slow_velocity_filter_
+        return derived_names(friction, self.load_columns, self.powers, radii, slow)
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
@@ -575,19 +571,21 @@ def restore_steering_features(params, n_features_in, feature_names_in=None):
         caller_name="SteeringFeatures",
     )
     step._check_parameters()
-    for name in ("friction_velocity", "velocity_filter", "friction_angle", "angle_lead"):
+    for name in LEARNED:
         if isinstance(params.get(name), str) and params[name] == AUTO:
             raise ValueError(
                 f"{name}='auto' is a setting to fit; a fitted step holds the chosen value."
             )
-    if step.velocity_filter is not None and step.sampling_period is None:
-        raise ValueError(
-            f"velocity_filter={step.velocity_filter!r} needs sampling_period (the seconds "
-            "between two rows); got sampling_period=None."
-        )
+    for name in ("velocity_filter", "slow_velocity_filter"):
+        if getattr(step, name) is not None and step.sampling_period is None:
+            raise ValueError(
+                f"{name}={getattr(step, name)!r} needs sampling_period (the seconds between "
+                "two rows); got sampling_period=None."
+            )
     step.friction_velocity_ = fitted_friction(step.friction_velocity)
     step.friction_angle_ = fitted_radii(step.friction_angle)
     step.angle_lead_ = fitted_lead(step.angle_lead, step.friction_angle_)
+    step.slow_velocity_filter_ = fitted_slow(step.slow_velocity_filter, step.friction_velocity)
     step.velocity_filter_ = None if step.friction_velocity is None else step.velocity_filter
     step.sampling_period_ = step.sampling_period
     step.friction_search_ = None
