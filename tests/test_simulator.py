@@ -29,6 +29,7 @@ from skhmmgmr.datasets import (
     torque_ahead,
 )
 from skhmmgmr.datasets._simulator._lane_keeping import human_run
+from skhmmgmr.datasets._simulator._protocol import protocol_runs, protocol_sections
 from skhmmgmr.datasets._simulator._road import (
     ANGLES,
     CLOTHOID_LENGTH,
@@ -472,3 +473,37 @@ def test_the_law_keeping_every_remnant_is_the_human():
 def test_the_law_names_a_remnant_it_does_not_know():
     with pytest.raises(ValueError, match="law_keeps names 'tremor'"):
         _law_frame("novice", keeps=("tremor",))
+
+
+def test_the_protocol_runs_are_the_protocol_recordings():
+    # the recordings of protocol_runs, simulated one by one, are the protocol's frame
+    frame = make_driving_protocol(
+        ("novice",),
+        n_train_per_setting=1,
+        n_validation=0,
+        n_test=1,
+        duration=3.0,
+        sampling_rate=20.0,
+        random_state=5,
+        perturbation=0.2,
+        perturbed_share=0.5,
+    )
+    template = SectionSpec(
+        duration=3.0,
+        setting=7,
+        speed_kmh=100.0,
+        sampling_rate=20.0,
+        scenario="highway",
+        random_state=None,
+        road_random_state=None,
+        sensor_noise="typical",
+        vehicle=None,
+        perturbation=0.2,
+    )
+    runs = protocol_runs(template, ("novice",), protocol_sections(1, 0, 1), 5, 0.5)
+    assert [run[2] for run in runs] == list(pd.unique(frame["recording"]))
+    assert runs[1][0].perturbation == 0.2 and runs[2][0].perturbation == 0.0
+    for run in (runs[1], runs[-1]):  # a perturbed training recording and the test one
+        again = human_run(*run)
+        recorded = frame[frame["recording"] == run[2]].reset_index(drop=True)
+        pd.testing.assert_frame_equal(again, recorded, check_like=True)
