@@ -324,9 +324,9 @@ def test_a_pickled_stream_goes_on_where_it_was(data, filtered):
     np.testing.assert_allclose(head + tail, filtered.predict(frame), rtol=0, atol=ATOL)
 
 
-def test_the_velocity_filter_of_the_stream_is_a_plain_loop():
-    decay = math.exp(-0.5)
-    settings = {
+def _one_velocity_filter(decay):
+    """The stream settings of one velocity column, filtered, and one friction width."""
+    return {
         "n_features_in": 1,
         "feature_names_in": None,
         "feature_names_out": ["x0", "steering_friction"],
@@ -339,6 +339,11 @@ def test_the_velocity_filter_of_the_stream_is_a_plain_loop():
         "load_positions": [],
         "powers": [],
     }
+
+
+def test_the_velocity_filter_of_the_stream_is_a_plain_loop():
+    decay = math.exp(-0.5)
+    settings = _one_velocity_filter(decay)
     stage = DerivedInputs(settings)
     velocity = np.random.default_rng(2).normal(scale=0.1, size=60)
     velocity[[0, 1, 10, 30, 31, 32]] = np.nan
@@ -354,6 +359,36 @@ def test_the_velocity_filter_of_the_stream_is_a_plain_loop():
     values = [0.05]
     stage.append(values)
     assert values[1] == pytest.approx(math.tanh(0.5), abs=1e-15)  # starts at the value again
+
+
+@pytest.mark.parametrize("layout", ["one filter's state", "decay beside its filter"])
+def test_a_stream_pickled_by_an_older_release_goes_on_where_it_was(layout):
+    decay = math.exp(-0.5)
+    settings = _one_velocity_filter(decay)
+    velocity = np.random.default_rng(3).normal(scale=0.1, size=40)
+    velocity[[12, 13]] = np.nan
+    stage = DerivedInputs(settings)
+    for value in velocity[:15]:
+        stage.append([float(value)])
+    state = dict(stage.__dict__)
+    if layout == "one filter's state":
+        low_pass = state.pop("filter")
+        del state["slow"]
+        state.update(
+            decay=decay, gain=1.0 - decay, filtered=low_pass.filtered, since=low_pass.since
+        )
+    else:
+        state["decay"] = decay
+    old = DerivedInputs.__new__(DerivedInputs)
+    old.__setstate__(state)
+    assert "decay" not in old.__dict__ and old.slow is None
+    expected = np.tanh(_plain_filter_with_gaps(velocity, decay) / 0.1)[15:]
+    got = []
+    for value in velocity[15:]:
+        values = [float(value)]
+        old.append(values)
+        got.append(values[1])
+    np.testing.assert_allclose(got, expected, rtol=1e-13)
 
 
 def _plain_play(angle, radius):

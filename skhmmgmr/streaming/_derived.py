@@ -81,7 +81,7 @@ class DerivedInputs:
         self.friction_velocity = settings["friction_velocity"]
         widths = self.friction_velocity
         self.widths = tuple(widths) if isinstance(widths, list | tuple) else (widths,)
-        self.decay = settings["filter_decay"]
+        decay = settings["filter_decay"]
         slow = settings.get("slow_filter_decay")
         self.slow = None if slow is None else LowPass(slow)
         self.sampling_period = settings["sampling_period"]
@@ -91,19 +91,20 @@ class DerivedInputs:
         self.lead_position = settings.get("lead_position")
         self.loads = tuple(int(p) for p in settings["load_positions"])
         self.powers = tuple(int(p) for p in settings["powers"])
-        self.filter = None if self.decay is None else LowPass(self.decay)
+        self.filter = None if decay is None else LowPass(decay)
         self.reset()
 
     def __setstate__(self, state):
-        # a stream pickled before the filters were LowPass objects held one filter's state
+        # a stream pickled before the filters were LowPass objects held one filter's state;
+        # one pickled before this release also kept the decay beside its LowPass
+        state = dict(state)
+        decay = state.pop("decay", None)
         if "filter" not in state:
-            state = dict(state)
-            decay = state.pop("decay", None)
             state["filter"] = None if decay is None else LowPass(decay)
             if decay is not None:
                 state["filter"].filtered = state.pop("filtered", None)
                 state["filter"].since = state.pop("since", 0)
-            state["decay"], state["slow"] = decay, None
+            state["slow"] = None
             state.pop("gain", None)
         self.__dict__.update(state)
 
