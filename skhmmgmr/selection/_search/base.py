@@ -44,18 +44,18 @@ def input_feature_names(fitted):
     return np.asarray(names, dtype=object)
 
 
-def _evaluation_context(estimator, y, groups, splits, sampling_period, search="full"):
+def _evaluation_context(estimator, y, groups, splits, sampling_period, search=None):
     """What a shared evaluation depends on besides the feature names, as one hash.
 
     The recording ids enter as integer codes and their distinct values: joblib hashes an
     object array of ids by pickling every string (about 1 s for 756,000 rows, once per
-    forward step, while every worker waited; issue #27). A screened evaluation (the fast
-    search, ``search`` then names it with its EM iterations per subset) is shared with fast
-    searches of the same iterations only.
+    forward step, while every worker waited; issue #27). ``search``: ``None`` for the full
+    search, else what names the fast search's screens (with their EM iterations per subset):
+    a screened evaluation is shared with fast searches of the same iterations only.
     """
     codes, ids = pd.factorize(groups, sort=False)
     context = (clone(estimator), y, codes, list(ids), splits, sampling_period)
-    return joblib.hash(context if search == "full" else (*context, search))
+    return joblib.hash(context if search is None else (*context, search))
 
 
 #: The constraints of the parameters every search takes: the selectors' (through
@@ -238,7 +238,7 @@ class RecordingSearchMixin:
         context = known = None
         if shared is not None and hasattr(self, "feature_names_in_"):
             fast = getattr(self, "_fast_search", None)
-            search = "full" if fast is None else ("fast", fast.subset_iterations)
+            search = None if fast is None else ("fast", fast.subset_iterations)
             context = _evaluation_context(
                 self._search_estimator(), y, groups, splits, self.sampling_period, search
             )
