@@ -48,11 +48,23 @@ a PNG. ``--states`` and
 variance that ``PREVIEW_FEATURES`` leave unexplained (1 - R^2; ``--penalty 12.5``), a unit
 measured here only.
 
+``--ceiling`` measures instead what the simulated human's own control law scores as an
+open-loop estimate (reference car, the ``--styles``, ``--rates`` and ``--seeds``): every
+test recording of the protocol simulated again with the same seeds, the law run a second
+time on the recording's states without its remnants (``law``: none; ``law+wander``: it
+knows the lane wander; ``law+angle+wander``: it knows the noise on the desired angle and the
+wander, only the torque remnant unknown), its torque at the sensor less the arms' damping
+and inertia (exact for the reference car's rigid column); its accuracy beside the
+pipeline's and the driver model's, the share of the measured torque's variance each
+leaves (mean over the recordings), and the human without remnants at the wheel of the
+held-out roads, over the human (lateral deviation, departures, torque RMS, reversals).
+
 Run with::
 
     python benchmarks/bench_driver_model.py              # 3 styles, 20/100 Hz, 4 cars, 3 seeds
     python benchmarks/bench_driver_model.py --quick      # defensive, 100 Hz, default car, seed 0
     python benchmarks/bench_driver_model.py --frontier --figure frontier.png
+    python benchmarks/bench_driver_model.py --ceiling --rates 20 --seeds 0
 """
 
 import argparse
@@ -77,6 +89,9 @@ from skhmmgmr.datasets import (
     make_driving_protocol,
     make_lane_keeping,
 )
+from skhmmgmr.datasets._simulator._lane_keeping import human_run
+from skhmmgmr.datasets._simulator._protocol import protocol_runs, protocol_sections
+from skhmmgmr.datasets._simulator._section import SectionSpec
 from skhmmgmr.metrics import accuracy_score, lane_keeping_metrics, smoothness_score
 from skhmmgmr.metrics._scores import recording_metrics
 from skhmmgmr.torque_pipeline import DEFAULT_PERTURBATION_PENALTY
@@ -124,6 +139,9 @@ def _parse(argv=None):
     parser.add_argument("--jobs", type=int, default=1, help="cases in parallel")
     parser.add_argument("--quick", action="store_true", help="defensive, 100 Hz, default car")
     parser.add_argument("--frontier", action="store_true", help="the trade-off instead")
+    parser.add_argument(
+        "--ceiling", action="store_true", help="the human's own law as an estimate instead"
+    )
     parser.add_argument("--penalties", nargs="+", type=float, default=[0, 0.5, 1, 1.5, 2, 3])
     parser.add_argument("--figure", default=None, help="PNG of the frontier")
     parser.add_argument("--output", default=None, help="CSV of every road's figures")
@@ -556,6 +574,106 @@ def road_figure(args, path):
     print(f"wrote {path}")
 
 
+# the remnants the law knows in --ceiling (none, the lane wander, all but the torque's)
+LAWS = {"law": (), "law+wander": ("wander",), "law+angle+wander": ("angle", "wander")}
+
+
+def law_estimates(style, rate, seed, test, args):
+    """The test recordings of the case's protocol again (reference car), with the human's
+    law of every :data:`LAWS` at the torque sensor, one column each."""
+    template = SectionSpec(
+        duration=args.train_duration,
+        setting=7,
+        speed_kmh=100.0,
+        sampling_rate=rate,
+        scenario="highway",
+        random_state=None,
+        road_random_state=None,
+        sensor_noise="typical",
+        vehicle=None,
+    )
+    sections = protocol_sections(2, 0, 6)
+    runs = protocol_runs(template, (style,), sections, seed, 1.0)
+    runs = [run for run in runs if run[3] == "test"]
+    laws = {}
+    for name, keeps in LAWS.items():
+        frames = [human_run(*run, law=keeps) for run in runs]
+        again = np.concatenate([frame["driver_torque"].to_numpy() for frame in frames])
+        if not np.array_equal(again, test["driver_torque"].to_numpy()):
+            raise RuntimeError("the test recordings simulated again differ from the protocol's")
+        laws[name] = np.concatenate([frame["law_torque"].to_numpy() for frame in frames])
+    return laws
+
+
+def ceiling_case(style, rate, seed, args):
+    """The human's law against the pipeline and the driver model on one case's test
+    recordings, and the remnant-free human on its roads."""
+    with threadpool_limits(1):
+        plain, perturbed = protocols(style, rate, None, seed, args)
+        test = plain.query("split == 'test'")
+        y, groups = test["driver_torque"].to_numpy(), test["recording"].to_numpy()
+        estimates = law_estimates(style, rate, seed, test, args)
+        for name in ("pipeline", "driver"):
+            model = fit(name, plain, perturbed, rate, args.penalty)
+            columns = list(model.feature_names_in_)
+            estimates[name] = model.predict(test[columns], groups=groups)
+        row = dict(style=style, rate=rate, seed=seed)
+        for name, estimate in estimates.items():
+            per_recording = recording_metrics(y, estimate, groups=groups, smoothness=False)
+            row[name] = accuracy_score(y, estimate, groups=groups)
+            row[f"{name} worst"] = float(np.min(per_recording.accuracy))
+            # the share of the measured torque's variance left: (1 - accuracy / 100)^2
+            row[f"{name} share"] = float(np.mean((1 - per_recording.accuracy / 100) ** 2))
+        quiet = dataclasses.replace(
+            DRIVER_STYLES[style], angle_remnant=0.0, torque_remnant=0.0, lane_wander=0.0
+        )
+        ratios = []
+        for road, human, _ in roads(style, rate, None, seed, args):
+            law = lane_keeping_metrics(make_lane_keeping(driver=quiet, **road))
+            ratios.append({key: law[key] / human[key] for key in CEILING_LOOP})
+            ratios[-1]["departures"] = (law["departures"], human["departures"])
+        deviation = [r["lateral_deviation_rms"] for r in ratios]
+        row["loop deviation"] = float(np.mean(deviation))
+        row["loop deviation min"], row["loop deviation max"] = min(deviation), max(deviation)
+        row["loop departures"] = "{}/{}".format(
+            *np.sum([r["departures"] for r in ratios], axis=0).astype(int)
+        )
+        for key in CEILING_LOOP[1:]:
+            row[f"loop {key}"] = float(np.mean([r[key] for r in ratios]))
+    return row
+
+
+CEILING_LOOP = ("lateral_deviation_rms", "torque_rms", "steering_reversal_rate")
+
+
+def ceiling_run(args):
+    jobs = (
+        delayed(ceiling_case)(style, rate, seed, args)
+        for style in args.styles
+        for rate in args.rates
+        for seed in args.seeds
+    )
+    table = pd.DataFrame(Parallel(n_jobs=args.jobs)(jobs))
+    if args.output:
+        table.to_csv(args.output, index=False)
+    accuracy = ["pipeline", "driver", *LAWS]
+    with pd.option_context("display.width", 250, "display.max_columns", 40):
+        print("Open-loop accuracy % (worst recording), test recordings, reference car:")
+        shown = table[["style", "rate", "seed"]].copy()
+        for name in accuracy:
+            pairs = zip(table[name], table[f"{name} worst"], strict=True)
+            shown[name] = [f"{mean:.2f} ({worst:.2f})" for mean, worst in pairs]
+        print(shown.to_string(index=False))
+        print("\nShare of the measured torque's variance each leaves (mean over recordings):")
+        shares = table[["style", "rate", "seed"]].copy()
+        for name in accuracy:
+            shares[name] = table[f"{name} share"]
+        print(shares.round(4).to_string(index=False))
+        print("\nThe human without remnants at the wheel, over the human (same roads):")
+        loop = [column for column in table.columns if column.startswith("loop")]
+        print(table[["style", "rate", "seed", *loop]].round(2).to_string(index=False))
+
+
 def main(argv=None):
     args = _parse(argv)
     start = time.perf_counter()
@@ -563,6 +681,8 @@ def main(argv=None):
         road_figure(args, args.road_figure)
     elif args.frontier:
         frontier_run(args)
+    elif args.ceiling:
+        ceiling_run(args)
     else:
         targets_run(args)
     print(f"total {time.perf_counter() - start:.0f} s")

@@ -28,6 +28,8 @@ from skhmmgmr.datasets import (
     make_lane_keeping,
     torque_ahead,
 )
+from skhmmgmr.datasets._simulator._lane_keeping import human_run
+from skhmmgmr.datasets._simulator._protocol import protocol_runs, protocol_sections
 from skhmmgmr.datasets._simulator._road import (
     ANGLES,
     CLOTHOID_LENGTH,
@@ -39,7 +41,7 @@ from skhmmgmr.datasets._simulator._road import (
     make_road,
     step_curvature,
 )
-from skhmmgmr.datasets._simulator._section import SectionSpec
+from skhmmgmr.datasets._simulator._section import Section, SectionSpec
 
 SPEED = 100.0 / 3.6
 
@@ -412,3 +414,96 @@ def test_no_simulator_function_is_over_80_lines_of_code():
                 sizes[f"{path.name}:{node.name}"] = _code_lines(node, lines)
     assert len(sizes) > 40
     assert {name: n for name, n in sizes.items() if n > 80} == {}
+
+
+def _law_frame(driver, sensor_noise=None, keeps=()):
+    """A 6 s human run of ``driver`` (parameters) with the noise-free law's torque, and its
+    section (same seeds: the remnants the human drew)."""
+    spec = SectionSpec(
+        duration=6.0,
+        setting=7,
+        speed_kmh=100.0,
+        sampling_rate=20.0,
+        scenario="highway",
+        random_state=4,
+        road_random_state=None,
+        sensor_noise=sensor_noise,
+        vehicle=None,
+    )
+    return human_run(spec, driver, law=keeps), Section(spec, driver)
+
+
+def test_the_law_without_remnants_is_the_remnant_free_human():
+    # a human without remnants drives by its law: the law's torque at the rigid column's
+    # sensor is the logged torque, and the frame is the one without the law
+    quiet = dataclasses.replace(
+        DRIVER_STYLES["novice"], angle_remnant=0.0, torque_remnant=0.0, lane_wander=0.0
+    )
+    frame, _ = _law_frame(quiet)
+    np.testing.assert_allclose(frame["law_torque"], frame["driver_torque"], rtol=0, atol=1e-12)
+    assert np.abs(frame["driver_torque"]).max() > 0.1
+    plain = make_lane_keeping(
+        6.0, driver=quiet, sampling_rate=20.0, random_state=4, sensor_noise=None
+    )
+    pd.testing.assert_frame_equal(frame.drop(columns="law_torque"), plain, check_like=False)
+
+
+def test_the_law_differs_from_the_human_by_its_torque_remnant():
+    # only the torque remnant: the law sees what the human sees, so that the human's torque
+    # at the wheel is the law's plus (1 + effort |law|) times the remnant at that step
+    driver = dataclasses.replace(DRIVER_STYLES["defensive"], angle_remnant=0.0, lane_wander=0.0)
+    frame, section = _law_frame(driver)
+    p = section.parameters
+    arms = p.arm_damping * frame["steering_wheel_velocity"].to_numpy()
+    arms = arms + p.arm_inertia * frame["steering_wheel_acceleration"].to_numpy()
+    human = frame["driver_torque"].to_numpy() + arms
+    law = frame["law_torque"].to_numpy() + arms
+    remnant = section.remnants[1][:: section.n_sub]
+    assert np.std(remnant) > 0.01
+    np.testing.assert_allclose(
+        human - law, (1.0 + p.torque_remnant_effort * np.abs(law)) * remnant, atol=1e-9
+    )
+
+
+def test_the_law_keeping_every_remnant_is_the_human():
+    frame, _ = _law_frame("novice", keeps=("angle", "torque", "wander"))
+    np.testing.assert_allclose(frame["law_torque"], frame["driver_torque"], rtol=0, atol=1e-12)
+
+
+def test_the_law_names_a_remnant_it_does_not_know():
+    with pytest.raises(ValueError, match="law_keeps names 'tremor'"):
+        _law_frame("novice", keeps=("tremor",))
+
+
+def test_the_protocol_runs_are_the_protocol_recordings():
+    # the recordings of protocol_runs, simulated one by one, are the protocol's frame
+    frame = make_driving_protocol(
+        ("novice",),
+        n_train_per_setting=1,
+        n_validation=0,
+        n_test=1,
+        duration=3.0,
+        sampling_rate=20.0,
+        random_state=5,
+        perturbation=0.2,
+        perturbed_share=0.5,
+    )
+    template = SectionSpec(
+        duration=3.0,
+        setting=7,
+        speed_kmh=100.0,
+        sampling_rate=20.0,
+        scenario="highway",
+        random_state=None,
+        road_random_state=None,
+        sensor_noise="typical",
+        vehicle=None,
+        perturbation=0.2,
+    )
+    runs = protocol_runs(template, ("novice",), protocol_sections(1, 0, 1), 5, 0.5)
+    assert [run[2] for run in runs] == list(pd.unique(frame["recording"]))
+    assert runs[1][0].perturbation == 0.2 and runs[2][0].perturbation == 0.0
+    for run in (runs[1], runs[-1]):  # a perturbed training recording and the test one
+        again = human_run(*run)
+        recorded = frame[frame["recording"] == run[2]].reset_index(drop=True)
+        pd.testing.assert_frame_equal(again, recorded, check_like=True)

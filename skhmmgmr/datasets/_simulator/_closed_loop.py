@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ._driver import human_steering
+from ._driver import REMNANTS, human_steering
 from ._steering import steering_column
 from ._vehicle import single_track
 
@@ -55,6 +55,8 @@ def simulate(
     column_log=None,
     perturbation=None,
     lost=None,
+    law_log=None,
+    law_keeps=(),
 ):
     """Integrate the closed loop of ``section`` for ``n_samples`` samples; return the log,
     an array (n_samples, 14) of :data:`LOG_COLUMNS`.
@@ -83,19 +85,17 @@ def simulate(
     driver's (the human's, or the torque source's) with a rigid column; the torsion bar's
     ``k_c (theta - theta_c) + c_c (theta' - theta_c')`` at the sample with a
     ``column_stiffness``, ``theta_c`` being the lower column's angle (see :mod:`._vehicle`).
+    ``law_log`` (with the human only): an array (n_samples,) that receives at every logged
+    sample the torque the human's control law asks at the wheel without its remnants (no
+    noise on the desired angle or the torque, no lane wander) but those named in
+    ``law_keeps`` (of :data:`._driver.REMNANTS`): a second copy of the law, with its own
+    delay line, hold and muscle, fed the states of the run, which the human with all its
+    remnants drives (:func:`._driver.human_steering`'s ``hand_torque``).
     """
     vehicle, dt, n_sub, road = section.vehicle, section.dt, section.n_sub, section.road
-    human = None
-    if torque_source is None:
-        if initial is not None:
-            raise ValueError("initial needs a torque_source (a human starts at rest)")
-        driver = section.parameters
-        human = human_steering(
-            driver, vehicle, road, section.offsets, section.speed, dt, section.remnants
-        )
-        bar_torque, column = steering_column(vehicle, dt, driver.arm_inertia, driver.arm_damping)
-    else:  # a torque source has no arm impedance of its own
-        bar_torque, column = steering_column(vehicle, dt, 0.0, 0.0)
+    if initial is not None and torque_source is None:
+        raise ValueError("initial needs a torque_source (a human starts at rest)")
+    human, bar_torque, column = _at_the_wheel(section, torque_source, law_log, law_keeps)
     rates = single_track(vehicle, section.speed)
     if perturbation is not None:
         perturbation = np.asarray(perturbation, dtype=float).tolist()
@@ -156,6 +156,39 @@ def simulate(
         e_psi_d = r - kappa * s_d
         e_psi += dt * e_psi_d
     return log
+
+
+def _at_the_wheel(section, torque_source, law_log, law_keeps):
+    """The human's step (None with a ``torque_source``, which has no arm impedance of its
+    own), logging its law into ``law_log`` when given (see :func:`simulate`), and the
+    steering column's ``(bar_torque, step)`` with the arms at the wheel."""
+    vehicle, dt = section.vehicle, section.dt
+    if torque_source is not None:
+        if law_log is not None:
+            raise ValueError("law_log needs the human at the wheel (torque_source=None)")
+        return None, *steering_column(vehicle, dt, 0.0, 0.0)
+    driver = section.parameters
+    column = steering_column(vehicle, dt, driver.arm_inertia, driver.arm_damping)
+    at = (driver, vehicle, section.road, section.offsets, section.speed, dt)
+    human = human_steering(*at, section.remnants)
+    if law_log is None:
+        return human, *column
+    unknown = sorted(set(law_keeps) - set(REMNANTS))
+    if unknown:
+        raise ValueError(f"law_keeps names {unknown[0]!r}; the remnants are {REMNANTS}")
+    quiet = tuple(
+        noise if name in law_keeps else np.zeros_like(noise)
+        for name, noise in zip(REMNANTS, section.remnants, strict=True)
+    )
+    law, n_sub = human_steering(*at, quiet), section.n_sub
+
+    def human_and_law(k, *seen):
+        t_law = law(k, *seen)  # the law's state moves on at every step
+        if k % n_sub == 0:
+            law_log[k // n_sub] = t_law
+        return human(k, *seen)
+
+    return human_and_law, *column
 
 
 def _lost_control_at(time, states, section, model, lost):

@@ -190,6 +190,10 @@ def coloured_noise(n, dt, correlation_time, rms, rng):
     return rms * noise
 
 
+#: The human's remnants, in the order :func:`draw_remnants` returns them.
+REMNANTS = ("angle", "torque", "wander")
+
+
 def draw_remnants(driver, n_steps, dt, rng):
     """The human driver's coloured noises over ``n_steps`` integration steps: on the desired
     angle, on the torque, and the lane wander (drawn for every driver, so that the sensor

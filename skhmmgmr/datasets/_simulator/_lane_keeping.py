@@ -3,7 +3,10 @@ measures what happened (:func:`make_lane_keeping`)."""
 
 import os
 
+import numpy as np
+
 from ..._core._compat import HasMethods, StrOptions, validate_params
+from ._closed_loop import LOG_COLUMNS
 from ._driver import DRIVER_STYLES, DriverParameters
 from ._section import Section, SectionSpec
 from ._sensors import measure
@@ -12,11 +15,22 @@ from ._sensors import measure
 CACHE = [str, os.PathLike, HasMethods(["cache"]), None]
 
 
-def human_run(spec, driver, recording=None, split="train"):
+def human_run(spec, driver, recording=None, split="train", law=None):
     """The tidy frame of a human of ``driver``'s style (or parameters) driving the section of
-    ``spec`` (a :class:`SectionSpec`), as :func:`make_lane_keeping` returns it."""
+    ``spec`` (a :class:`SectionSpec`), as :func:`make_lane_keeping` returns it.
+
+    ``law`` (a tuple of the remnants the law keeps, of :data:`._driver.REMNANTS`; ``()``
+    none) adds the column ``law_torque`` [Nm]: at every sample, the torque of the human's
+    control law without its other remnants, run on the states of the recording (see
+    :func:`._closed_loop.simulate`'s ``law_log``), less the arms' damping and inertia on
+    the steering wheel's motion, which a rigid column's torque sensor reads (exact; with a
+    torsion bar the sensor reads it less the upper wheel's inertia torque). Its error on
+    the clean ``driver_torque`` of a rigid column is the torque of the remnants it does not
+    keep.
+    """
     section = Section(spec, driver)
-    log = section.simulate()
+    law_log = None if law is None else np.empty(section.n_samples)
+    log = section.simulate(law_log=law_log, law_keeps=law or ())
     features, torque = section.features(log)
     # sensors: drawn after the closed loop, which therefore does not depend on sensor_noise
     features, torque = measure(
@@ -25,7 +39,12 @@ def human_run(spec, driver, recording=None, split="train"):
     style = driver if isinstance(driver, str) else "custom"
     if recording is None:
         recording = spec.recording_of(style)
-    return section.frame(log, features, torque, recording=recording, driver=style, split=split)
+    frame = section.frame(log, features, torque, recording=recording, driver=style, split=split)
+    if law is not None:
+        wheel = dict(zip(LOG_COLUMNS, log.T, strict=True))
+        arms = section.parameters.arm_damping * wheel["theta_d"]
+        frame["law_torque"] = law_log - arms - section.parameters.arm_inertia * wheel["theta_dd"]
+    return frame
 
 
 @validate_params(

@@ -29,7 +29,7 @@ def _perturbed(sections, share):
     return flags
 
 
-def _sections(n_train_per_setting, n_validation, n_test):
+def protocol_sections(n_train_per_setting, n_validation, n_test):
     """(split, setting, index) of every section of one driver, in protocol order."""
     sections = [
         ("train", setting, i) for setting in TRAIN_SETTINGS for i in range(n_train_per_setting)
@@ -37,6 +37,32 @@ def _sections(n_train_per_setting, n_validation, n_test):
     sections += [("validation", EVALUATION_SETTING, i) for i in range(n_validation)]
     sections += [("test", EVALUATION_SETTING, i) for i in range(n_test)]
     return sections
+
+
+def protocol_runs(template, drivers, sections, random_state, perturbed_share):
+    """The recordings of the protocol, in order: ``(spec, driver, recording, split)`` for
+    every driver (a style name) and section of :func:`protocol_sections`, ``spec`` being
+    ``template`` (a :class:`SectionSpec`) with the section's setting, seeds and perturbation
+    (``template.perturbation`` in ``perturbed_share`` of the training sections, 0 in the
+    others, None without an experiment)."""
+    rng = check_random_state(random_state)
+    high = np.iinfo(np.int32).max
+    road_seeds = rng.randint(high, size=len(sections))
+    driver_seeds = rng.randint(high, size=(len(drivers), len(sections)))
+    unperturbed = None if template.perturbation is None else 0.0
+    perturbed = _perturbed(sections, perturbed_share)
+    runs = []
+    for d, driver in enumerate(drivers):
+        for k, (split, setting, i) in enumerate(sections):
+            spec = replace(
+                template,
+                setting=setting,
+                random_state=int(driver_seeds[d, k]),
+                road_random_state=int(road_seeds[k]),
+                perturbation=template.perturbation if perturbed[k] else unperturbed,
+            )
+            runs.append((spec, driver, f"{driver}-{split}-s{setting}-{i}", split))
+    return runs
 
 
 @validate_params(
@@ -156,7 +182,6 @@ def make_driving_protocol(
         random_state=None,
         road_random_state=None,
     )
-    unperturbed = None if perturbation is None else 0.0
     if isinstance(drivers, str):
         drivers = (drivers,)
     drivers = tuple(drivers)
@@ -170,30 +195,15 @@ def make_driving_protocol(
             )
     if len(set(drivers)) != len(drivers):
         raise ValueError(f"drivers must not repeat a style, got drivers={drivers!r}.")
-    sections = _sections(n_train_per_setting, n_validation, n_test)
+    sections = protocol_sections(n_train_per_setting, n_validation, n_test)
     if not sections:
         raise ValueError(
             "The protocol holds no section: n_train_per_setting, n_validation and n_test are all 0."
         )
-    rng = check_random_state(random_state)
-    high = np.iinfo(np.int32).max
-    road_seeds = rng.randint(high, size=len(sections))
-    driver_seeds = rng.randint(high, size=(len(drivers), len(sections)))
     run = human_run if cache is None else cached(cache)
-    perturbed = _perturbed(sections, perturbed_share)
-    jobs = []
-    for d, driver in enumerate(drivers):
-        for k, (split, setting, i) in enumerate(sections):
-            spec = replace(
-                template,
-                setting=setting,
-                random_state=int(driver_seeds[d, k]),
-                road_random_state=int(road_seeds[k]),
-                perturbation=template.perturbation if perturbed[k] else unperturbed,
-            )
-            jobs.append(delayed(run)(spec, driver, f"{driver}-{split}-s{setting}-{i}", split))
+    jobs = protocol_runs(template, drivers, sections, random_state, perturbed_share)
     return concat_frames(
-        Parallel(n_jobs=n_jobs)(jobs),
+        Parallel(n_jobs=n_jobs)(delayed(run)(*job) for job in jobs),
         attrs={
             "scenario": template.scenario,
             "speed": template.speed,

@@ -217,7 +217,7 @@ class Section:
                 perturbation_stream(spec.random_state, rng),
             )
 
-    def simulate(self, torque_source=None, column_log=None, lost=None):
+    def simulate(self, torque_source=None, column_log=None, lost=None, law_log=None, law_keeps=()):
         """The logged states of the closed loop over the section (see :func:`simulate`)."""
         return simulate(
             self,
@@ -226,6 +226,8 @@ class Section:
             column_log=column_log,
             perturbation=self.perturbation,
             lost=lost,
+            law_log=law_log,
+            law_keeps=law_keeps,
         )
 
     def logged_perturbation(self, n_rows):
