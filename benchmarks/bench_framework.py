@@ -240,12 +240,17 @@ def run_searches(seeds, *, n_drivers, duration, n_jobs, cache, save=None, full_t
         fits = {search: em_fits(report) for search, report in reports.items()}
         print(
             f"  EM fits per stage, full fits + screened models (screened: "
-            f"{_screening.SUBSET_ITERATIONS} EM iterations per subset, "
-            f"{_screening.STATE_ITERATIONS} after each split of a state):"
+            f"{_screening.EXHAUSTIVE_ITERATIONS} EM iterations per exhaustive subset, "
+            f"{_screening.SUBSET_ITERATIONS} per forward subset, "
+            f"{_screening.STATE_ITERATIONS} after each split of a state), and the ratio of "
+            "the full fits:"
         )
         for stage in fits["full"]:
             (a, b), (c, d) = fits["full"][stage], fits["fast"][stage]
-            print(f"    {stage:<26} full {a:5d} + {b:4d}   fast {c:5d} + {d:4d}")
+            print(
+                f"    {stage:<26} full {a:5d} + {b:4d}   fast {c:5d} + {d:4d}   "
+                f"{a / max(c, 1):6.1f}x"
+            )
         results[seed] = {
             "wall_s": walls,
             "ratio": walls["full"] / walls["fast"],
@@ -581,6 +586,21 @@ def main(argv=None):
         help="the bound of a screened score's relative error (e.g. 0.0025) under which the "
         "fast search fits in full what can change a relevance decision (default: off)",
     )
+    parser.add_argument(
+        "--exhaustive-iterations",
+        type=int,
+        default=None,
+        help="EM iterations of a feature subset the exhaustive wrapper screens from the joint "
+        f"model's marginal (default: {_screening.EXHAUSTIVE_ITERATIONS}; 0: the marginal "
+        "scored as it is)",
+    )
+    parser.add_argument(
+        "--subset-iterations",
+        type=int,
+        default=None,
+        help="the same for the forward wrapper's subsets "
+        f"(default: {_screening.SUBSET_ITERATIONS})",
+    )
     parser.add_argument("--skip-reference", action="store_true")
     parser.add_argument("--skip-peer", action="store_true")
     parser.add_argument("--save", default=None, help="directory for the selection tables")
@@ -591,6 +611,10 @@ def main(argv=None):
     )
     args = parser.parse_args(argv)
     _screening.SCREENING_ERROR = args.screening_error
+    if args.exhaustive_iterations is not None:
+        _screening.EXHAUSTIVE_ITERATIONS = args.exhaustive_iterations
+    if args.subset_iterations is not None:
+        _screening.SUBSET_ITERATIONS = args.subset_iterations
     if args.scale:
         return run_scale(
             n_drivers=args.drivers,

@@ -7,6 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from _protocol_data import PERIOD, make_protocol
+from scipy.stats import multivariate_normal
 from sklearn.base import clone
 from sklearn.model_selection import PredefinedSplit
 
@@ -151,7 +152,16 @@ def test_the_fast_forward_search_starts_from_the_full_search_first_step(searched
     # both paths take the same feature first
     first = [p[p["accepted"]]["feature"].iloc[0] for p in (full.paths_, fast.paths_)]
     assert first[0] == first[1]
-    assert fast.results_.loc[fast.results_["n_features"] < len(FEATURES), "screened"].all()
+    # the single features (the scales of every score) are fitted in full, to the bit; the
+    # other subsets below the joint model are screened
+    results = fast.results_
+    singles = results[results["n_features"] == 1]
+    assert not singles["screened"].any()
+    merged = singles.merge(full.results_, on=["subset", "recording"], suffixes=("", "_f"))
+    assert len(merged) == len(singles) == len(FEATURES) * results["recording"].nunique()
+    np.testing.assert_array_equal(merged["accuracy"], merged["accuracy_f"])
+    np.testing.assert_array_equal(merged["smoothness"], merged["smoothness_f"])
+    assert results.loc[results["n_features"].between(2, len(FEATURES) - 1), "screened"].all()
     monkeypatch.setattr(_screening, "SCREENING_ERROR", 0.005)
     fast = ForwardFeatureSelector(search="fast", **kwargs).fit(X, y, groups=groups)
     # the single features (the scales) and what the confirmed paths read are fitted as the
@@ -205,3 +215,96 @@ def test_the_framework_searches_fast_and_fits_what_it_compares_in_full():
         groups=train["recording"],
     )
     np.testing.assert_array_equal(fast.final_model.means_, final.means_)
+
+
+def _marginal_prediction(model, dims, X, groups):
+    """Causal GMR estimate of the HMM of a fitted ``model`` over the columns ``dims`` (the
+    inputs, then the target) alone: a plain-loop forward recursion on every recording."""
+    means, covs = model.means_[:, dims], model.covars_[:, dims][:, :, dims]
+    n_inputs, n_states = len(dims) - 1, len(model.startprob_)
+    estimates = np.empty(len(X))
+    for recording in pd.unique(groups):
+        rows = np.flatnonzero(np.asarray(groups) == recording)
+        alpha = None
+        for t in rows:
+            x = X[t]
+            b = np.array(
+                [
+                    multivariate_normal(means[k, :n_inputs], covs[k, :n_inputs, :n_inputs]).pdf(x)
+                    for k in range(n_states)
+                ]
+            )
+            alpha = model.startprob_ * b if alpha is None else (alpha @ model.transmat_) * b
+            alpha = alpha / alpha.sum()
+            conditional = [
+                means[k, n_inputs]
+                + covs[k, n_inputs, :n_inputs]
+                @ np.linalg.solve(covs[k, :n_inputs, :n_inputs], x - means[k, :n_inputs])
+                for k in range(n_states)
+            ]
+            estimates[t] = alpha @ np.array(conditional)
+    return estimates
+
+
+def test_a_screened_subset_is_the_joint_model_marginal_scored_as_a_fitted_model(searched):
+    # with no EM iteration (the default), a subset's model is the marginal of the joint model
+    # over its columns and the target, and it is scored as the full search scores a fit
+    X, y, groups, cv = searched
+    assert _screening.EXHAUSTIVE_ITERATIONS == 0
+    fast = ExhaustiveFeatureSelector(search="fast", cv=cv, sampling_period=PERIOD).fit(
+        X, y, groups=groups
+    )
+    train, val = next(cv.split(X, y))
+    joint = HMMGMRRegressor(n_states=2, random_state=0).fit(
+        X.iloc[train].to_numpy(), y[train], groups=groups.iloc[train]
+    )
+    for subset in [("f0",), ("f1", "f3"), ("f0", "f1", "f2")]:
+        dims = [FEATURES.index(f) for f in subset] + [len(FEATURES)]
+        prediction = _marginal_prediction(
+            joint, dims, X.iloc[val][list(subset)].to_numpy(), groups.iloc[val]
+        )
+        expected = evaluate_recordings(
+            y[val], prediction, groups=groups.iloc[val], sampling_period=PERIOD
+        )
+        screened = fast.results_[fast.results_["subset"] == subset]
+        assert screened["screened"].all()
+        merged = screened.merge(expected, on="recording", suffixes=("", "_r"))
+        assert len(merged) == len(expected)
+        np.testing.assert_allclose(merged["accuracy"], merged["accuracy_r"], rtol=1e-8)
+        np.testing.assert_allclose(merged["smoothness"], merged["smoothness_r"], rtol=1e-8)
+
+
+@pytest.mark.parametrize("iterations", [0, 3])
+def test_with_one_state_a_screened_subset_is_the_full_search_fit(searched, monkeypatch, iterations):
+    # one state: the joint Gaussian's marginal is the maximum-likelihood Gaussian of the
+    # subset's columns and the target, the optimum EM reaches from any start and never leaves
+    X, y, groups, cv = searched
+    monkeypatch.setattr(_screening, "EXHAUSTIVE_ITERATIONS", iterations)
+    estimator = HMMGMRRegressor(n_states=1, random_state=0)
+    kwargs = dict(cv=cv, sampling_period=PERIOD)
+    full = ExhaustiveFeatureSelector(estimator, search="full", **kwargs).fit(X, y, groups=groups)
+    fast = ExhaustiveFeatureSelector(estimator, search="fast", **kwargs).fit(X, y, groups=groups)
+    merged = fast.results_.merge(full.results_, on=["subset", "recording"], suffixes=("", "_f"))
+    assert len(merged) == len(full.results_) and merged["screened"].sum() > 0
+    np.testing.assert_allclose(merged["accuracy"], merged["accuracy_f"], rtol=1e-9)
+    np.testing.assert_allclose(merged["smoothness"], merged["smoothness_f"], rtol=1e-9)
+    assert fast.subset_ == full.subset_
+
+
+def test_the_framework_forward_step_reads_no_screen_of_other_iterations(monkeypatch):
+    # with the exhaustive wrapper's subsets screened with another number of EM iterations
+    # than the forward wrapper's, the forward step of the framework reads none of the
+    # exhaustive step's screens: it is the forward wrapper fitted alone
+    monkeypatch.setattr(_screening, "SUBSET_ITERATIONS", _screening.EXHAUSTIVE_ITERATIONS + 1)
+    protocol = make_protocol(n_recordings=(4, 3, 2), length=150, n_features=4, seed=1)
+    report = select_parameters(protocol, k_max=2, progress=False, search="fast")
+    searched = protocol[protocol["split"] != "test"].reset_index(drop=True)
+    alone = clone(report.sources["forward"]).fit(
+        searched[FEATURES], searched["driver_torque"].to_numpy(), groups=searched["recording"]
+    )
+    columns = ["subset", "recording", "accuracy", "smoothness", "screened"]
+    ordered = [
+        t.sort_values(["subset", "recording"])[columns].reset_index(drop=True)
+        for t in (report.sources["forward"].results_, alone.results_)
+    ]
+    pd.testing.assert_frame_equal(ordered[0], ordered[1])

@@ -47,14 +47,16 @@ verbose : int, default=0
     "search": """\
 search : {"full", "fast"}, default="full"
     How the compared models are fitted. ``"full"``: each from its own start (the estimator's
-    k-means) until EM converges. ``"fast"``: the feature subsets start from the marginal of
-    one model fitted on all the searched features, the numbers of states grow one split of a
-    state at a time, each with a few EM iterations, and the models a decision reads (the K of
-    the 1% rule) are fitted as ``"full"`` fits them. The fast search serves a plain
-    :class:`~skhmmgmr.HMMGMRRegressor` with complete data, no read-out and one output; any
-    other estimator is searched in full. It is opt-in: its screened models sit in other EM
-    optima than the full search's, and some selections differ as they do between two k-means
-    starts of the full search. See the user guide, "The parameter-selection framework".""",
+    k-means) until EM converges. ``"fast"``: every feature subset (but the forward wrapper's
+    single features) is scored as the marginal of one model fitted on all the searched
+    features (no EM iteration of its own), the numbers of states grow one split of a state
+    at a time, each with a few EM iterations, and the models a decision reads (the K of the
+    1% rule) are fitted as ``"full"`` fits them. The fast
+    search serves a plain :class:`~skhmmgmr.HMMGMRRegressor` with complete data, no read-out
+    and one output; any other estimator is searched in full. It is opt-in: its screened
+    models sit in other EM optima than the full search's, and some selections differ as they
+    do between two k-means starts of the full search. See the user guide, "The
+    parameter-selection framework".""",
     "k_min, k_max": """\
 k_min, k_max : int, default=1, 20
     Range of K, the number of hidden states.""",

@@ -9,7 +9,7 @@ there. Everything is in the engine's (standardised) units.
   and the covariance block of those columns exactly, so the HMM of a feature subset starts from
   the states of the joint model over all candidates (same start and transition probabilities);
   only what the other columns decided (which rows a state holds, how often it is left) has to
-  move, in the few EM iterations that follow.
+  move, in the EM iterations that may follow (the fast search scores the marginal itself).
 - :func:`split_state`: a state is replaced by two halves whose equal mixture has its mean and
   covariance (:meth:`~skhmmgmr._hmm._emissions.GaussianEmissions.split`), offset along the
   principal axis of its covariance; the halves share its start probability and its incoming

@@ -407,8 +407,9 @@ def _add_framework_options(parser, defaults=None):
     parser.add_argument("--screening-tol", type=finite_float, default=None, help=text)
     text = (
         "how the wrappers and the state sweep fit their models: full (each from its own "
-        "start until EM converges) or fast (from a joint model, a few EM iterations; the K "
-        "the rule reads and the compared candidates fitted in full)"
+        "start until EM converges) or fast (subsets scored as a joint model's marginal, the K "
+        "grown by splitting a state; the K the rule reads and the compared candidates "
+        "fitted in full)"
     )
     parser.add_argument(
         "--search", choices=("full", "fast"), default=framework["search"], help=text

@@ -6,10 +6,13 @@ converges. The fast one (``search="fast"``) starts each model from a model fitte
 
 - **feature subsets** (the exhaustive and forward wrappers): per split, one joint model over
   all the selector's columns is fitted as the full search fits a model (it is the evaluation of
-  the all-columns subset); every other subset starts from its marginal over the subset's
-  columns and the target (:func:`~skhmmgmr._hmm._em_start.marginal_start`, exact in the means
-  and covariances) and runs at most :data:`SUBSET_ITERATIONS` EM iterations, on the training
-  columns standardised once per split;
+  the all-columns subset); every other subset is scored as the joint model's marginal over
+  the subset's columns and the target (:func:`~skhmmgmr._hmm._em_start.marginal_start`, exact
+  in the means and covariances), after a few EM iterations on the training columns
+  standardised once per split: :data:`EXHAUSTIVE_ITERATIONS` in the exhaustive wrapper,
+  :data:`SUBSET_ITERATIONS` elsewhere (none by default: a screened subset then costs the
+  forward pass over its validation rows only); the forward wrapper fits its single features
+  in full;
 - **numbers of states** (the state selector): one chain per split grows K = 1 to the largest K
   by splitting a state (:func:`~skhmmgmr._hmm._em_start.split_state`) and running at most
   :data:`STATE_ITERATIONS` EM iterations after each split; then the numbers of states that the
@@ -55,9 +58,21 @@ from ._evaluation import (
 #: The search strategies (``search``): the fast one (this module) and the full one.
 SEARCHES = ("fast", "full")
 
-#: EM iterations of a feature subset from the joint model's marginal (fewer when EM converges
-#: at the estimator's ``tol`` first).
-SUBSET_ITERATIONS = 2
+#: EM iterations of a feature subset from the joint model's marginal (fewer when the
+#: estimator's ``n_iter`` is smaller; 0: the marginal is scored as it is): the forward
+#: wrapper's (and any other's but the exhaustive one). The forward wrapper fits its single
+#: features in full in the fast search: they scale every score, and a single feature's
+#: marginal of a joint model over many is a poor model (screened, a forward path on the
+#: tests' data took an irrelevant feature first).
+SUBSET_ITERATIONS = 0
+#: The exhaustive wrapper's: every subset of the joint model's columns is screened and the
+#: relevance reads each recording's best. Measured on the exhaustive stage at the thesis'
+#: scale (issue #47, the selection page of the user guide): a screen with 0 iterations costs
+#: 4 % of a full fit (25 ms against 0.58 s per subset, one process), with 2 iterations 23 %;
+#: the per-recording best subsets and the exhaustive candidates that differ from the full
+#: search's are 224 of 462 and 20 of 66 with 0 iterations, 195 and 14 with 2, while the full
+#: search with another k-means seed differs from itself in 298 and 26.
+EXHAUSTIVE_ITERATIONS = 0
 #: EM iterations after every split of the state sweep's chain.
 STATE_ITERATIONS = 3
 #: When set (a share, e.g. 0.01): the bound of the relative error of a screened model's terms
@@ -101,15 +116,17 @@ class _EMSettings:
     state_iterations: int
 
     @classmethod
-    def of(cls, estimator, params):
+    def of(cls, estimator, params, subset_iterations=None):
         merged = {**estimator.get_params(), **params}
         n_iter = merged["n_iter"]
+        if subset_iterations is None:
+            subset_iterations = SUBSET_ITERATIONS
         return cls(
             merged["n_states"],
             n_iter,
             merged["tol"],
             merged["reg_covar"],
-            min(SUBSET_ITERATIONS, n_iter),
+            min(subset_iterations, n_iter),
             min(STATE_ITERATIONS, n_iter),
         )
 
@@ -220,15 +237,16 @@ def _screen_subsets(arrays, data_token, fold, joint, batch, settings, sampling_p
     tables = []
     for columns in batch:
         params = marginal_start(joint, [*columns, n_features])
-        # a state that collapses on these columns leaves the marginal, still a model
-        with suppress(NotPositiveDefiniteError):
-            params = refined(
-                _engine_columns(standardised, columns),
-                recordings,
-                params,
-                n_iter=settings.subset_iterations,
-                reg_covar=settings.reg_covar,
-            )
+        if settings.subset_iterations > 0:
+            # a state that collapses on these columns leaves the marginal, still a model
+            with suppress(NotPositiveDefiniteError):
+                params = refined(
+                    _engine_columns(standardised, columns),
+                    recordings,
+                    params,
+                    n_iter=settings.subset_iterations,
+                    reg_covar=settings.reg_covar,
+                )
         table = _scored(params, fold, columns, standardised, sampling_period)
         table["converged"] = False  # a fixed number of iterations, no convergence test
         tables.append(table)
@@ -279,6 +297,8 @@ class FastSearch:
         ``evaluate_in_full(models, desc, with_bic=...)``: the table of ``models`` on this
         data fitted as the full search fits them (the selector's
         :func:`~._evaluation.evaluate_models`).
+    subset_iterations : int, default=None
+        EM iterations of a screened feature subset; ``None``: :data:`SUBSET_ITERATIONS`.
     """
 
     def __init__(
@@ -294,8 +314,12 @@ class FastSearch:
         memory,
         verbose,
         evaluate_in_full,
+        subset_iterations=None,
     ):
         self.estimator = clone(estimator)
+        if subset_iterations is None:
+            subset_iterations = SUBSET_ITERATIONS
+        self.subset_iterations = subset_iterations
         self.X, self.y, self.groups, self.splits = X, y, groups, splits
         self.sampling_period = sampling_period
         self.n_jobs, self.memory, self.verbose = n_jobs, check_memory(memory), verbose
@@ -399,7 +423,7 @@ class FastSearch:
     def _subsets(self, models, params, desc):
         joints = self._joint_models(params, desc)
         all_columns = tuple(range(self.X.shape[1]))
-        settings = _EMSettings.of(self.estimator, params)
+        settings = _EMSettings.of(self.estimator, params, self.subset_iterations)
         order = sorted(
             range(len(models)), key=lambda i: -((len(models[i][0]) + 1) ** 2) * settings.n_states
         )

@@ -44,17 +44,18 @@ def input_feature_names(fitted):
     return np.asarray(names, dtype=object)
 
 
-def _evaluation_context(estimator, y, groups, splits, sampling_period, search="full"):
+def _evaluation_context(estimator, y, groups, splits, sampling_period, search=None):
     """What a shared evaluation depends on besides the feature names, as one hash.
 
     The recording ids enter as integer codes and their distinct values: joblib hashes an
     object array of ids by pickling every string (about 1 s for 756,000 rows, once per
-    forward step, while every worker waited; issue #27). A screened evaluation (the fast
-    search) is shared with fast searches only.
+    forward step, while every worker waited; issue #27). ``search``: ``None`` for the full
+    search, else what names the fast search's screens (with their EM iterations per subset):
+    a screened evaluation is shared with fast searches of the same iterations only.
     """
     codes, ids = pd.factorize(groups, sort=False)
     context = (clone(estimator), y, codes, list(ids), splits, sampling_period)
-    return joblib.hash((*context, search) if search == "fast" else context)
+    return joblib.hash(context if search is None else (*context, search))
 
 
 #: The constraints of the parameters every search takes: the selectors' (through
@@ -173,12 +174,18 @@ class RecordingSearchMixin:
             memory=self.memory,
             verbose=self.verbose,
             evaluate_in_full=partial(self._evaluate_in_full, X, y, groups, splits),
+            subset_iterations=self._subset_iterations(),
         ) as search:
             self._fast_search = search
             try:
                 yield
             finally:
                 del self._fast_search
+
+    def _subset_iterations(self):
+        """EM iterations of a feature subset screened by the fast search; ``None``: the
+        fast search's default (:data:`~._screening.SUBSET_ITERATIONS`)."""
+        return None
 
     def _evaluate_models(self, X, y, groups, splits, models, desc, *, with_bic=False, settle=None):
         """The selectors' one door to evaluation: every model, ``(columns, params)``, fitted
@@ -230,7 +237,8 @@ class RecordingSearchMixin:
         shared = shared_evaluation_store()
         context = known = None
         if shared is not None and hasattr(self, "feature_names_in_"):
-            search = "full" if getattr(self, "_fast_search", None) is None else "fast"
+            fast = getattr(self, "_fast_search", None)
+            search = None if fast is None else ("fast", fast.subset_iterations)
             context = _evaluation_context(
                 self._search_estimator(), y, groups, splits, self.sampling_period, search
             )

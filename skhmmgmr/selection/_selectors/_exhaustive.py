@@ -180,6 +180,10 @@ class ExhaustiveFeatureSelector(RecordingSelector):
         self.support_ = np.isin(self._names(), self.subset_)
         return self
 
+    def _subset_iterations(self):
+        # every subset is screened: the fast search scores the joint model's marginals
+        return _screening.EXHAUSTIVE_ITERATIONS
+
     def rescore(self, trade_off="50/50"):
         """D.5-normalised performance score of every (subset, recording), without refitting.
 

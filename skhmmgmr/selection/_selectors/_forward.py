@@ -191,11 +191,12 @@ class ForwardFeatureSelector(RecordingSelector):
 
         with self._searching(X, y, groups, splits):
             tolerance = _screening.SCREENING_ERROR
-            fast = getattr(self, "_fast_search", None) is not None and tolerance is not None
+            searched_fast = getattr(self, "_fast_search", None) is not None
+            fast = searched_fast and tolerance is not None
             singles = [(j,) for j in range(n_features)]
-            evaluate(singles)
-            if fast:  # the scales every score is divided by, from full fits
-                evaluate([s for s in singles if s not in exact], in_full=True)
+            # the fast search fits the single features in full: every score is divided by
+            # their sums, and a single feature's marginal of the joint model is a poor model
+            evaluate(singles, in_full=searched_fast)
             scores.freeze(singles)
 
             path_ids = ["average"] if self.mode == "average" else list(range(len(recordings)))
