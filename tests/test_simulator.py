@@ -416,20 +416,16 @@ def test_no_simulator_function_is_over_80_lines_of_code():
     assert {name: n for name, n in sizes.items() if n > 80} == {}
 
 
+def _highway_spec(**spec):
+    """A 20 Hz highway section of setting 7 at 100 km/h in the reference car."""
+    defaults = dict(setting=7, speed_kmh=100.0, sampling_rate=20.0, scenario="highway")
+    return SectionSpec(**defaults, road_random_state=None, vehicle=None, **spec)
+
+
 def _law_frame(driver, sensor_noise=None, keeps=()):
     """A 6 s human run of ``driver`` (parameters) with the noise-free law's torque, and its
     section (same seeds: the remnants the human drew)."""
-    spec = SectionSpec(
-        duration=6.0,
-        setting=7,
-        speed_kmh=100.0,
-        sampling_rate=20.0,
-        scenario="highway",
-        random_state=4,
-        road_random_state=None,
-        sensor_noise=sensor_noise,
-        vehicle=None,
-    )
+    spec = _highway_spec(duration=6.0, random_state=4, sensor_noise=sensor_noise)
     return human_run(spec, driver, law=keeps), Section(spec, driver)
 
 
@@ -488,17 +484,8 @@ def test_the_protocol_runs_are_the_protocol_recordings():
         perturbation=0.2,
         perturbed_share=0.5,
     )
-    template = SectionSpec(
-        duration=3.0,
-        setting=7,
-        speed_kmh=100.0,
-        sampling_rate=20.0,
-        scenario="highway",
-        random_state=None,
-        road_random_state=None,
-        sensor_noise="typical",
-        vehicle=None,
-        perturbation=0.2,
+    template = _highway_spec(
+        duration=3.0, random_state=None, sensor_noise="typical", perturbation=0.2
     )
     runs = protocol_runs(template, ("novice",), protocol_sections(1, 0, 1), 5, 0.5)
     assert [run[2] for run in runs] == list(pd.unique(frame["recording"]))

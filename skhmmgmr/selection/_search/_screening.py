@@ -116,11 +116,9 @@ class _EMSettings:
     state_iterations: int
 
     @classmethod
-    def of(cls, estimator, params, subset_iterations=None):
+    def of(cls, estimator, params, subset_iterations):
         merged = {**estimator.get_params(), **params}
         n_iter = merged["n_iter"]
-        if subset_iterations is None:
-            subset_iterations = SUBSET_ITERATIONS
         return cls(
             merged["n_states"],
             n_iter,
@@ -467,7 +465,7 @@ class FastSearch:
         ks = [int(p["n_states"]) for _, p in models]
         # K = 1, fitted as the full search fits it, starts every chain
         joints = self._joint_models({"n_states": 1}, desc, with_bic=True)
-        settings = _EMSettings.of(self.estimator, {})
+        settings = _EMSettings.of(self.estimator, {}, self.subset_iterations)
         task = self.memory.cache(_grow_states, ignore=["arrays"])
         version = code_version() if self._token is not None else None
         jobs = [
